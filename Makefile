@@ -1,0 +1,26 @@
+# The two commands of the README. Each creates .venv if it is missing.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+SCENE ?= geometry_precompute/scenes/03_three_mugs_row_tight.toml
+
+.PHONY: demo test lint bench clean
+
+$(BIN)/shacc: pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e ".[test]"
+	touch $(BIN)/shacc
+
+demo: $(BIN)/shacc
+	$(BIN)/shacc evaluate $(SCENE)
+
+test: $(BIN)/shacc
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -q
+
+bench: $(BIN)/shacc
+	$(BIN)/python benchmarks/bench_precompute.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

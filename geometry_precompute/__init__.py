@@ -1,0 +1,23 @@
+"""CPU half of the ShaCC evaluator: scenes, templates, meshes, clutteredness,
+clusters, Shrinking and the bake (never imports jax)."""
+
+from importlib.resources import files
+from pathlib import Path
+
+from .bake import BakedScenes, bake
+from .errors import InputError
+from .generate import random_scene
+from .precompute import PrecomputeResult, precompute
+from .scene import Scene, load_scene, save_scene, scene_from_dict
+from .settings import DEFAULTS, SPECS, Settings
+
+
+def shipped_scene_paths() -> list[Path]:
+    """The manual scenes that ship with the package, in file-name order."""
+    return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes").iterdir()
+                  if str(p).endswith(".toml"))
+
+
+__all__ = ["DEFAULTS", "SPECS", "BakedScenes", "InputError", "PrecomputeResult", "Scene",
+           "Settings", "bake", "load_scene", "precompute", "random_scene", "save_scene",
+           "scene_from_dict", "shipped_scene_paths"]

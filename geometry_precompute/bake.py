@@ -1,0 +1,179 @@
+"""The bake: precomputed scenes as fixed-shape NumPy arrays (SPEC section 15).
+
+This is the only bridge between the CPU half and the JAX half: ``shacc_jax``
+reads these arrays by name and nothing else. S scenes are padded to T tasks
+(``max_tasks``, default the largest task count); padded rows have
+``task_mask = False``, harmless finite geometry, and can never activate or
+weigh in an average on the JAX side.
+
+Fields (float64 here; the JAX side casts to its working precision):
+
+==================  ==========  ===============================================
+field               shape       meaning
+==================  ==========  ===============================================
+task_mask           (S, T)      True for a real task
+kind                (S, T)      shape kind: 0 cylinder, 1 disk, 2 cone, 3 box
+center_init         (S, T, 3)   initial space's centre (cone: apex), world
+quat_init           (S, T, 4)   initial space's rotation (w, x, y, z)
+dims_init           (S, T, 3)   initial dims (cylinder/disk r, h, 0; cone L,
+                                alpha, 0; box half extents)
+center_opt ...      ...         the same for the shrunk (optimised) space
+cluster             (S, T)      meta-skill cluster label (0, 1, ... in task
+                                order) for tasks in clusters of >= 2, else -1
+orient_kind         (S, T)      0 fixed, 1 point-to-axis
+orient_quat         (S, T, 4)   fixed orientation; for point-to-axis the
+                                orientation used on the axis itself
+orient_axis         (S, T, 2)   (x, y) of the vertical axis (point-to-axis)
+starts              (S, N, 7)   start poses [x, y, z, qw, qx, qy, qz]
+dt, v_max,          (S,)        rollout settings, one value per scene, so a
+omega_max,                      sweep can vary them without recompiling
+activation_tol,
+max_steps,
+ambiguity_nearest
+==================  ==========  ===============================================
+
+Metadata for people (names, task ids, C values) rides along in ``meta`` and
+is never passed to JAX.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .precompute import PrecomputeResult
+from .shapes import KIND_CODES
+from .starts import start_poses
+
+ARRAY_FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt",
+                "quat_opt", "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis",
+                "starts")
+PARAM_FIELDS = ("dt", "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest")
+_PAD_DIMS = (0.01, 0.01, 0.01)
+
+
+@dataclass(frozen=True)
+class BakedScenes:
+    task_mask: np.ndarray
+    kind: np.ndarray
+    center_init: np.ndarray
+    quat_init: np.ndarray
+    dims_init: np.ndarray
+    center_opt: np.ndarray
+    quat_opt: np.ndarray
+    dims_opt: np.ndarray
+    cluster: np.ndarray
+    orient_kind: np.ndarray
+    orient_quat: np.ndarray
+    orient_axis: np.ndarray
+    starts: np.ndarray
+    dt: np.ndarray
+    v_max: np.ndarray
+    omega_max: np.ndarray
+    activation_tol: np.ndarray
+    max_steps: np.ndarray
+    ambiguity_nearest: np.ndarray
+    meta: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def n_scenes(self) -> int:
+        return self.task_mask.shape[0]
+
+    @property
+    def n_tasks(self) -> int:
+        return self.task_mask.shape[1]
+
+    @property
+    def n_starts(self) -> int:
+        return self.starts.shape[1]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: getattr(self, k) for k in ARRAY_FIELDS + PARAM_FIELDS}
+
+
+def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
+    norms = np.linalg.norm(q, axis=-1)
+    if not np.all(np.isfinite(q)):
+        raise InputError(source, fld, "must be finite (no NaN or inf)")
+    if np.any(norms < 1e-9):
+        raise InputError(source, fld, "a zero quaternion is not a rotation")
+
+
+def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
+         starts: np.ndarray | None = None) -> BakedScenes:
+    """Bake precomputed scenes; ``starts`` (N, 7) or (S, N, 7) overrides the
+    settings' start grid (quaternions are validated and normalised)."""
+    if not results:
+        raise InputError("<bake>", "results", "needs at least one precomputed scene")
+    n_max = max(len(r.spaces) for r in results)
+    T = n_max if max_tasks is None else int(max_tasks)
+    if T < n_max:
+        raise InputError("<bake>", "max_tasks", f"{T} is fewer than the largest scene's "
+                         f"{n_max} tasks")
+    S = len(results)
+    if starts is None:
+        per_scene = [start_poses(r.scene, r.settings) for r in results]
+        counts = {len(p) for p in per_scene}
+        if len(counts) != 1:
+            raise InputError("<bake>", "start_grid", "every scene of one batch needs the same "
+                             f"number of start poses, got {sorted(counts)}")
+        starts_arr = np.stack(per_scene)
+    else:
+        starts_arr = np.asarray(starts, dtype=np.float64)
+        if starts_arr.ndim == 2:
+            starts_arr = np.broadcast_to(starts_arr, (S, *starts_arr.shape)).copy()
+        if starts_arr.ndim != 3 or starts_arr.shape[0] != S or starts_arr.shape[2] != 7:
+            raise InputError("<bake>", "starts", "must have shape (N, 7) or (S, N, 7), got "
+                             f"{starts_arr.shape}")
+        _check_quaternions(starts_arr[..., 3:], "<bake>", "starts[..., 3:7]")
+        starts_arr[..., 3:] /= np.linalg.norm(starts_arr[..., 3:], axis=-1, keepdims=True)
+
+    out = {
+        "task_mask": np.zeros((S, T), bool),
+        "kind": np.zeros((S, T), np.int32),
+        "cluster": np.full((S, T), -1, np.int32),
+        "orient_kind": np.zeros((S, T), np.int32),
+        "orient_quat": np.tile([1.0, 0.0, 0.0, 0.0], (S, T, 1)),
+        "orient_axis": np.zeros((S, T, 2)),
+    }
+    for which in ("init", "opt"):
+        out[f"center_{which}"] = np.zeros((S, T, 3))
+        out[f"quat_{which}"] = np.tile([1.0, 0.0, 0.0, 0.0], (S, T, 1))
+        out[f"dims_{which}"] = np.tile(_PAD_DIMS, (S, T, 1))
+    params = {k: np.zeros(S) for k in PARAM_FIELDS}
+    params["max_steps"] = np.zeros(S, np.int32)
+    params["ambiguity_nearest"] = np.zeros(S, bool)
+    for si, r in enumerate(results):
+        s = r.settings
+        if s["collision"] != "off":
+            raise InputError(r.scene.source, "settings.collision",
+                             "'mjx' collision checking is not available in this version; "
+                             "use collision = \"off\"")
+        for ti, space in enumerate(r.spaces):
+            out["task_mask"][si, ti] = True
+            out["kind"][si, ti] = KIND_CODES[r.shapes_init[ti].kind]
+            for which, shape in (("init", r.shapes_init[ti]), ("opt", r.shapes_opt[ti])):
+                out[f"center_{which}"][si, ti] = shape.center
+                out[f"quat_{which}"][si, ti] = shape.quat
+                out[f"dims_{which}"][si, ti] = shape.dims
+            o = space.orientation
+            out["orient_kind"][si, ti] = 1 if o.kind == "point_to_axis" else 0
+            out["orient_quat"][si, ti] = o.quat
+            out["orient_axis"][si, ti] = o.axis_xy
+        for label, members in enumerate(r.meta_clusters()):
+            out["cluster"][si, members] = label
+        for k in ("dt", "v_max", "omega_max"):
+            params[k][si] = s[k]
+        params["activation_tol"][si] = s["activation_tol"]
+        params["max_steps"][si] = s["max_steps"]
+        params["ambiguity_nearest"][si] = s["ambiguity"] == "nearest"
+    meta = {
+        "names": [r.scene.name for r in results],
+        "task_ids": [r.task_ids for r in results],
+        "C_init": np.array([r.C_init for r in results]),
+        "C_final": np.array([r.C_final for r in results]),
+    }
+    return BakedScenes(starts=starts_arr, meta=meta, **out, **params)

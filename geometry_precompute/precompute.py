@@ -1,0 +1,86 @@
+"""The per-scene CPU pipeline: spaces, C_init, clusters, Shrinking, C_final, d, h.
+
+:func:`precompute` is what ``shacc precompute`` runs and what the bake
+consumes. It runs once per scene; its cost is measured by
+``benchmarks/bench_precompute.py``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .clusters import clusters_from_pairs, intersecting_pairs
+from .clutteredness import clutteredness
+from .intersect import SpaceSet
+from .metrics import entropic_clutteredness, mean_distance
+from .scene import Scene
+from .settings import Settings
+from .shapes import Shape
+from .shrinking import shrink
+from .templates import TaskSpace, resolve_tasks
+
+
+@dataclass(frozen=True)
+class PrecomputeResult:
+    scene: Scene
+    settings: Settings
+    spaces: list[TaskSpace]
+    shapes_init: list[Shape]
+    shapes_opt: list[Shape]
+    q_opt: list[np.ndarray]
+    C_init: float
+    C_final: float
+    clusters: list[list[int]]  # every component, singletons included, in task order
+    iterations: int
+    still_intersecting: list[tuple[int, int]]
+    d: float
+    h: float
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def task_ids(self) -> list[str]:
+        return [t.id for t in self.scene.tasks]
+
+    def shrunk_params(self) -> dict[str, dict[str, float]]:
+        return {s.task.id: {n: float(v) for n, v in zip(s.param_names, q, strict=True)}
+                for s, q in zip(self.spaces, self.q_opt, strict=True)}
+
+    def meta_clusters(self) -> list[list[int]]:
+        return [c for c in self.clusters if len(c) >= 2]
+
+
+def precompute(scene: Scene, settings: Settings | None = None) -> PrecomputeResult:
+    s = scene.settings() if settings is None else settings
+    t0 = time.perf_counter()
+    spaces = resolve_tasks(scene, s)
+    shapes_init = [sp.shape() for sp in spaces]
+    sections = s["mesh_sections"]
+    t1 = time.perf_counter()
+    coll = SpaceSet(shapes_init)
+    pairs = intersecting_pairs(coll)
+    clusters = clusters_from_pairs(len(spaces), pairs)
+    t2 = time.perf_counter()
+    # Booleans only for the pairs coal found intersecting (clutteredness.py says why).
+    c_init = clutteredness(shapes_init, sections, pairs)
+    t3 = time.perf_counter()
+    if c_init > 0.0:
+        res = shrink(spaces, s["shrink_step"], s["shrink_max_iter"], space_set=coll)
+        q_opt, iterations, still = res.q_opt, res.iterations, res.still_intersecting
+        shapes_opt = [sp.shape(q) for sp, q in zip(spaces, q_opt, strict=True)]
+    else:  # SPEC section 7: a scene with C_init = 0 is left as it is.
+        q_opt, iterations, still = [sp.q_init.copy() for sp in spaces], 0, []
+        shapes_opt = list(shapes_init)
+    t4 = time.perf_counter()
+    c_final = clutteredness(shapes_opt, sections, still) if c_init > 0.0 else 0.0
+    t5 = time.perf_counter()
+    positions = [o.position for o in scene.objects]
+    d = mean_distance(positions)
+    h = entropic_clutteredness(positions, s["entropy_variant"])
+    t6 = time.perf_counter()
+    seconds = {"spaces": t1 - t0, "clusters": t2 - t1, "C_init": t3 - t2, "shrinking": t4 - t3,
+               "C_final": t5 - t4, "metrics": t6 - t5, "total": t6 - t0}
+    return PrecomputeResult(scene, s, spaces, shapes_init, shapes_opt, q_opt, c_init, c_final,
+                            clusters, iterations, still, d, h, seconds)

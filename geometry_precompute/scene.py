@@ -1,0 +1,304 @@
+"""The scene model and its TOML files (SPEC sections 3, 13 and 16).
+
+:func:`load_scene` reads and validates a file; :func:`scene_from_dict`
+validates a parsed table (``source`` names where it came from);
+:func:`save_scene` writes the same format back. Every rule of SPEC section 13
+raises :class:`~geometry_precompute.errors.InputError` naming the file, the
+field and the rule. Object-dependent rules (template fits its object, bounds
+min <= init, bodies apart) are checked here too, through the templates, so a
+loaded scene is always one the precompute can run.
+
+One key beyond SPEC section 3 is accepted: an optional top-level
+``description`` (one line of text), used by the shipped scenes.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from .errors import InputError
+from .settings import DEFAULTS, Settings
+
+OBJECT_DEFAULTS = {
+    "mug": {"radius": 0.045, "height": 0.10},
+    "cup": {"radius": 0.040, "height": 0.09},
+}
+OBJECT_KINDS = ("mug", "cup", "box")
+TEMPLATE_OBJECTS = {
+    "side_grasp": ("mug", "cup"),
+    "handle_grasp": ("cup",),
+    "top_grasp": ("mug", "cup", "box"),
+    "drawer_pull": ("box",),
+}
+TEMPLATE_PARAMS = {
+    "side_grasp": ("radius",),
+    "handle_grasp": ("length", "half_angle"),
+    "top_grasp": ("radius",),
+    "drawer_pull": ("depth",),
+}
+TEMPLATE_FIXED = {
+    "side_grasp": ("height",),
+    "handle_grasp": (),
+    "top_grasp": ("thickness", "offset"),
+    "drawer_pull": ("width", "height"),
+}
+# Objects interpenetrate when coal's signed distance between bodies is below this.
+INTERPENETRATION_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    id: str
+    kind: str
+    position: tuple[float, float, float]
+    yaw: float = 0.0
+    radius: float | None = None
+    height: float | None = None
+    half_extents: tuple[float, float, float] | None = None
+
+    @property
+    def body_radius(self) -> float:
+        """The object's radius; for a box the half-diagonal of its top face."""
+        if self.kind == "box":
+            ex, ey, _ = self.half_extents
+            return math.hypot(ex, ey)
+        return self.radius
+
+    @property
+    def body_height(self) -> float:
+        if self.kind == "box":
+            return 2.0 * self.half_extents[2]
+        return self.height
+
+
+@dataclass(frozen=True)
+class Task:
+    id: str
+    object: str
+    template: str
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    fixed: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    objects: tuple[SceneObject, ...]
+    tasks: tuple[Task, ...]
+    settings_overrides: Mapping[str, Any] = field(default_factory=dict)
+    description: str = ""
+    source: str = "<scene>"
+
+    def object(self, object_id: str) -> SceneObject:
+        for o in self.objects:
+            if o.id == object_id:
+                return o
+        raise KeyError(object_id)
+
+    def settings(self, base: Settings = DEFAULTS,
+                 overrides: Mapping[str, Any] | None = None) -> Settings:
+        """Settings in SPEC section 16's precedence: the scene's [settings] over the
+        defaults, then ``overrides`` (command line or sweep axes) over those."""
+        s = base.with_overrides(self.settings_overrides, self.source, "settings.")
+        if overrides:
+            s = s.with_overrides(overrides, "<overrides>")
+        return s
+
+
+_TOP_KEYS = {"name", "description", "objects", "tasks", "settings"}
+_OBJECT_KEYS = {"id", "kind", "position", "yaw", "radius", "height", "half_extents"}
+_TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
+
+
+def _number(value: Any, src: str, fld: str, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(src, fld, f"must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise InputError(src, fld, "must be finite (no NaN or inf)")
+    if positive and value <= 0:
+        raise InputError(src, fld, f"must be > 0, got {value!r}")
+    return float(value)
+
+
+def _vector(value: Any, n: int, src: str, fld: str, positive: bool = False) -> tuple:
+    if not isinstance(value, list | tuple) or len(value) != n:
+        raise InputError(src, fld, f"must be a list of {n} numbers, got {value!r}")
+    return tuple(_number(v, src, f"{fld}[{i}]", positive) for i, v in enumerate(value))
+
+
+def _string(value: Any, src: str, fld: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(src, fld, f"must be a non-empty string, got {value!r}")
+    return value
+
+
+def _check_keys(table: Any, allowed: set[str], required: set[str], src: str, where: str) -> None:
+    if not isinstance(table, Mapping):
+        raise InputError(src, where or "<top>", "must be a table")
+    for key in table:
+        if key not in allowed:
+            raise InputError(src, f"{where}{key}", f"unknown field (allowed: {sorted(allowed)})")
+    for key in sorted(required):
+        if key not in table:
+            raise InputError(src, f"{where}{key}", "missing required field")
+
+
+def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
+    where = f"objects[{i}]."
+    _check_keys(raw, _OBJECT_KEYS, {"id", "kind", "position"}, src, where)
+    oid = _string(raw["id"], src, where + "id")
+    where = f"objects[{oid}]."
+    kind = raw["kind"]
+    if kind not in OBJECT_KINDS:
+        raise InputError(src, where + "kind", f"unknown object kind {kind!r} "
+                         f"(known: {', '.join(OBJECT_KINDS)})")
+    position = _vector(raw["position"], 3, src, where + "position")
+    yaw = _number(raw.get("yaw", 0.0), src, where + "yaw")
+    if kind == "box":
+        for key in ("radius", "height"):
+            if key in raw:
+                raise InputError(src, where + key, "not a field of a box (use half_extents)")
+        if "half_extents" not in raw:
+            raise InputError(src, where + "half_extents", "missing required field for a box")
+        he = _vector(raw["half_extents"], 3, src, where + "half_extents", positive=True)
+        return SceneObject(oid, kind, position, yaw, half_extents=he)
+    if "half_extents" in raw:
+        raise InputError(src, where + "half_extents", f"not a field of a {kind} (boxes only)")
+    radius = _number(raw.get("radius", OBJECT_DEFAULTS[kind]["radius"]), src, where + "radius",
+                     positive=True)
+    height = _number(raw.get("height", OBJECT_DEFAULTS[kind]["height"]), src, where + "height",
+                     positive=True)
+    return SceneObject(oid, kind, position, yaw, radius=radius, height=height)
+
+
+def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) -> Task:
+    where = f"tasks[{i}]."
+    _check_keys(raw, _TASK_KEYS, {"id", "object", "template"}, src, where)
+    tid = _string(raw["id"], src, where + "id")
+    where = f"tasks[{tid}]."
+    obj_id = _string(raw["object"], src, where + "object")
+    template = raw["template"]
+    if template not in TEMPLATE_OBJECTS:
+        raise InputError(src, where + "template", f"unknown template {template!r} "
+                         f"(known: {', '.join(TEMPLATE_OBJECTS)})")
+    if obj_id not in objects:
+        raise InputError(src, where + "object", f"no object with id {obj_id!r} in the scene")
+    kind = objects[obj_id].kind
+    if kind not in TEMPLATE_OBJECTS[template]:
+        raise InputError(src, where + "template", f"{template} does not fit a {kind} "
+                         f"(fits: {', '.join(TEMPLATE_OBJECTS[template])})")
+    bounds_raw = raw.get("bounds", {})
+    _check_keys(bounds_raw, set(TEMPLATE_PARAMS[template]), set(), src, where + "bounds.")
+    bounds = {}
+    for name, value in bounds_raw.items():
+        lo, hi = _vector(value, 2, src, f"{where}bounds.{name}", positive=True)
+        if lo > hi:
+            raise InputError(src, f"{where}bounds.{name}", f"min {lo} > init {hi}")
+        bounds[name] = (lo, hi)
+    fixed_raw = raw.get("fixed", {})
+    _check_keys(fixed_raw, set(TEMPLATE_FIXED[template]), set(), src, where + "fixed.")
+    fixed = {name: _number(v, src, f"{where}fixed.{name}", positive=True)
+             for name, v in fixed_raw.items()}
+    return Task(tid, obj_id, template, bounds, fixed)
+
+
+def scene_from_dict(data: Mapping[str, Any], source: str = "<scene>",
+                    check_geometry: bool = True) -> Scene:
+    """Validate a parsed scene table (SPEC sections 3 and 13) and build a Scene."""
+    src = str(source)
+    _check_keys(data, _TOP_KEYS, {"name"}, src, "")
+    name = _string(data["name"], src, "name")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise InputError(src, "description", "must be a string")
+    raw_objects = data.get("objects", [])
+    raw_tasks = data.get("tasks", [])
+    if not isinstance(raw_objects, list) or not raw_objects:
+        raise InputError(src, "objects", "a scene needs at least one object (empty scene)")
+    if not isinstance(raw_tasks, list) or not raw_tasks:
+        raise InputError(src, "tasks", "a scene needs at least one task (empty scene)")
+    objects: dict[str, SceneObject] = {}
+    for i, raw in enumerate(raw_objects):
+        obj = _parse_object(raw, i, src)
+        if obj.id in objects:
+            raise InputError(src, f"objects[{i}].id", f"duplicate object id {obj.id!r}")
+        objects[obj.id] = obj
+    tasks: dict[str, Task] = {}
+    for i, raw in enumerate(raw_tasks):
+        task = _parse_task(raw, i, src, objects)
+        if task.id in tasks:
+            raise InputError(src, f"tasks[{i}].id", f"duplicate task id {task.id!r}")
+        tasks[task.id] = task
+    settings_raw = data.get("settings", {})
+    if not isinstance(settings_raw, Mapping):
+        raise InputError(src, "settings", "must be a table")
+    DEFAULTS.with_overrides(settings_raw, src, "settings.")  # validates every key and value
+    scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), dict(settings_raw),
+                  description, src)
+    if check_geometry:
+        from .intersect import check_bodies_apart
+        from .templates import resolve_tasks  # templates need the scene model: import late
+
+        resolve_tasks(scene, scene.settings())
+        check_bodies_apart(scene)
+    return scene
+
+
+def load_scene(path: str | Path) -> Scene:
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise InputError(path, "<file>", "no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
+    return scene_from_dict(data, str(path))
+
+
+def scene_to_dict(scene: Scene) -> dict[str, Any]:
+    out: dict[str, Any] = {"name": scene.name}
+    if scene.description:
+        out["description"] = scene.description
+    objs = []
+    for o in scene.objects:
+        d: dict[str, Any] = {"id": o.id, "kind": o.kind, "position": list(o.position)}
+        if o.yaw:
+            d["yaw"] = o.yaw
+        if o.kind == "box":
+            d["half_extents"] = list(o.half_extents)
+        else:
+            if o.radius != OBJECT_DEFAULTS[o.kind]["radius"]:
+                d["radius"] = o.radius
+            if o.height != OBJECT_DEFAULTS[o.kind]["height"]:
+                d["height"] = o.height
+        objs.append(d)
+    tasks = []
+    for t in scene.tasks:
+        d = {"id": t.id, "object": t.object, "template": t.template}
+        if t.bounds:
+            d["bounds"] = {k: list(v) for k, v in t.bounds.items()}
+        if t.fixed:
+            d["fixed"] = dict(t.fixed)
+        tasks.append(d)
+    out["objects"] = objs
+    out["tasks"] = tasks
+    if scene.settings_overrides:
+        out["settings"] = {k: (list(v) if isinstance(v, tuple) else v)
+                           for k, v in scene.settings_overrides.items()}
+    return out
+
+
+def save_scene(scene: Scene, path: str | Path) -> None:
+    """Write ``scene`` as TOML; written to a temporary file first, then renamed."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_bytes(tomli_w.dumps(scene_to_dict(scene)).encode())
+    tmp.replace(path)

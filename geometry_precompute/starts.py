@@ -1,0 +1,45 @@
+"""Start poses of the Automaton (SPEC section 9).
+
+A grid of n_y x n_z points on the vertical plane x = min(object x) - offset,
+y in [y_c - w, y_c + w] (y_c the mean object y), z in the height band, ordered
+y-major (for each y ascending, every z ascending). A grid of one point along
+an axis takes the middle of its range. Orientations: one uniformly random
+rotation per grid point from ``numpy.random.default_rng(seed)`` through
+scipy's ``Rotation.random`` (so they depend on the seed and grid size only,
+not on the scene), or frame_from_approach((1, 0, 0)) for ``"forward"``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .frames import frame_from_approach, quat_from_matrix
+from .scene import Scene
+from .settings import Settings
+
+
+def _axis(lo: float, hi: float, n: int) -> np.ndarray:
+    return np.array([(lo + hi) / 2.0]) if n == 1 else np.linspace(lo, hi, n)
+
+
+def start_orientations(settings: Settings) -> np.ndarray:
+    ny, nz = settings["start_grid"]
+    n = ny * nz
+    if settings["start_orientation"] == "forward":
+        return np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+    rot = Rotation.random(n, rng=np.random.default_rng(settings["seed"]))
+    return quat_from_matrix(rot.as_matrix())
+
+
+def start_poses(scene: Scene, settings: Settings) -> np.ndarray:
+    """(n_y * n_z, 7) rows of [x, y, z, qw, qx, qy, qz]."""
+    pos = np.array([o.position for o in scene.objects])
+    ny, nz = settings["start_grid"]
+    x = pos[:, 0].min() - settings["start_plane_offset"]
+    yc = pos[:, 1].mean()
+    w = settings["start_y_halfwidth"]
+    z0, z1 = settings["start_z_range"]
+    yy, zz = np.meshgrid(_axis(yc - w, yc + w, ny), _axis(z0, z1, nz), indexing="ij")
+    points = np.stack([np.full(yy.size, x), yy.ravel(), zz.ravel()], axis=1)
+    return np.concatenate([points, start_orientations(settings)], axis=1)

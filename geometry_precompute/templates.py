@@ -1,0 +1,157 @@
+"""Skill templates: from a task to its position space and orientation space.
+
+SPEC section 3's table, with every default read from the settings and the
+task's own ``[tasks.bounds]`` / ``[tasks.fixed]`` taking precedence. A
+:class:`TaskSpace` knows its shrinkable parameters (names, min, init) and
+builds its :class:`~geometry_precompute.shapes.Shape` for any parameter
+vector, so Shrinking never needs to know which template it works on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .frames import frame_from_approach, quat_from_matrix, yaw_matrix
+from .scene import TEMPLATE_PARAMS, Scene, SceneObject, Task
+from .settings import Settings
+from .shapes import Shape
+
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class OrientationSpace:
+    """``fixed``: always ``quat``. ``point_to_axis``: frame_from_approach towards the
+    vertical line through ``axis_xy``; on that line itself, ``quat`` (the object's yaw
+    direction)."""
+
+    kind: str
+    quat: tuple[float, float, float, float]
+    axis_xy: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class TaskSpace:
+    task: Task
+    obj: SceneObject
+    template: str
+    param_names: tuple[str, ...]
+    q_min: np.ndarray
+    q_init: np.ndarray
+    fixed: dict[str, float]
+    orientation: OrientationSpace
+    pose_quat: tuple[float, float, float, float]  # the space's rotation; fixed by the template
+
+    def shape(self, q: np.ndarray | None = None) -> Shape:
+        q = self.q_init if q is None else np.asarray(q, dtype=np.float64)
+        return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat)
+
+
+def _quat(m: np.ndarray) -> tuple[float, float, float, float]:
+    return tuple(float(v) for v in quat_from_matrix(m))
+
+
+def object_body(obj: SceneObject) -> Shape:
+    """The object's body as a shape (cylinder or box), for collision checks."""
+    x, y, z = obj.position
+    if obj.kind == "box":
+        ex, ey, ez = obj.half_extents
+        return Shape("box", (x, y, z + ez), _quat(yaw_matrix(obj.yaw)), (ex, ey, ez))
+    return Shape("cylinder", (x, y, z + obj.height / 2), IDENTITY, (obj.radius, obj.height, 0.0))
+
+
+def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cup handle's grasp point g and direction u (SPEC section 3)."""
+    u = np.array([np.cos(obj.yaw), np.sin(obj.yaw), 0.0])
+    g = np.asarray(obj.position) + (obj.radius + offset) * u + np.array([0, 0, obj.height / 2])
+    return g, u
+
+
+def _pose_quat(template: str, obj: SceneObject) -> tuple[float, float, float, float]:
+    if template == "handle_grasp":
+        return _quat(frame_from_approach((np.cos(obj.yaw), np.sin(obj.yaw), 0.0)))
+    if template == "drawer_pull":
+        return _quat(yaw_matrix(obj.yaw))
+    return IDENTITY
+
+
+def _build_shape(template: str, obj: SceneObject, q: np.ndarray, fixed: dict,
+                 pose_quat: tuple) -> Shape:
+    x, y, z = obj.position
+    if template == "side_grasp":
+        h = fixed["height"]
+        return Shape("cylinder", (x, y, z + h / 2), pose_quat, (float(q[0]), h, 0.0))
+    if template == "handle_grasp":
+        g, _ = handle_point(obj, fixed["handle_offset"])
+        return Shape("cone", tuple(g), pose_quat, (float(q[0]), float(q[1]), 0.0))
+    if template == "top_grasp":
+        zc = z + obj.body_height + fixed["offset"]
+        return Shape("disk", (x, y, zc), pose_quat, (float(q[0]), fixed["thickness"], 0.0))
+    # drawer_pull: the local -x face stays put, the far face moves with the depth.
+    ex, _, ez = obj.half_extents
+    depth = float(q[0])
+    c, s = np.cos(obj.yaw), np.sin(obj.yaw)
+    lx = -ex - depth / 2
+    center = (obj.position[0] + c * lx, obj.position[1] + s * lx, obj.position[2] + ez)
+    return Shape("box", center, pose_quat, (depth / 2, fixed["width"] / 2, fixed["height"] / 2))
+
+
+def _template_values(template: str, obj: SceneObject, s: Settings) -> tuple[dict, dict]:
+    """(bounds {name: (min, init)}, fixed {name: value}) from the settings."""
+    if template == "side_grasp":
+        return ({"radius": (obj.body_radius + s["side_grasp.radius_margin"],
+                            s["side_grasp.radius_init"])},
+                {"height": obj.body_height + s["side_grasp.height_margin"]})
+    if template == "handle_grasp":
+        return ({"length": (s["handle_grasp.length_min"], s["handle_grasp.length_init"]),
+                 "half_angle": (s["handle_grasp.half_angle_min"],
+                                s["handle_grasp.half_angle_init"])},
+                {"handle_offset": s["handle_grasp.handle_offset"]})
+    if template == "top_grasp":
+        return ({"radius": (obj.body_radius + s["top_grasp.radius_margin"],
+                            s["top_grasp.radius_init"])},
+                {"thickness": s["top_grasp.thickness"], "offset": s["top_grasp.offset"]})
+    _, ey, ez = obj.half_extents
+    return ({"depth": (s["drawer_pull.depth_min"], s["drawer_pull.depth_init"])},
+            {"width": 2 * ey, "height": 2 * ez})
+
+
+def _orientation(template: str, obj: SceneObject, s: Settings) -> OrientationSpace:
+    if template == "side_grasp":
+        yaw_dir = (np.cos(obj.yaw), np.sin(obj.yaw), 0.0)
+        return OrientationSpace("point_to_axis", _quat(frame_from_approach(yaw_dir)),
+                                (obj.position[0], obj.position[1]))
+    if template == "handle_grasp":
+        _, u = handle_point(obj, s["handle_grasp.handle_offset"])
+        return OrientationSpace("fixed", _quat(frame_from_approach(-u)))
+    if template == "top_grasp":
+        return OrientationSpace("fixed", _quat(frame_from_approach((0.0, 0.0, -1.0))))
+    return OrientationSpace("fixed", _quat(frame_from_approach(yaw_matrix(obj.yaw)[:, 0])))
+
+
+def resolve_task(scene: Scene, task: Task, settings: Settings) -> TaskSpace:
+    obj = scene.object(task.object)
+    bounds, fixed = _template_values(task.template, obj, settings)
+    bounds.update(task.bounds)
+    fixed.update(task.fixed)
+    names = TEMPLATE_PARAMS[task.template]
+    for name in names:
+        lo, hi = bounds[name]
+        if not lo <= hi:
+            raise InputError(scene.source, f"tasks[{task.id}].bounds.{name}",
+                             f"min {lo:.4g} > init {hi:.4g} for this {obj.kind} (the template "
+                             "does not fit its object; set [tasks.bounds] or the settings)")
+        if name == "half_angle" and not hi < np.pi / 2:
+            raise InputError(scene.source, f"tasks[{task.id}].bounds.{name}",
+                             "a cone's half angle must be below pi/2")
+    q_min = np.array([bounds[n][0] for n in names])
+    q_init = np.array([bounds[n][1] for n in names])
+    return TaskSpace(task, obj, task.template, names, q_min, q_init, fixed,
+                     _orientation(task.template, obj, settings), _pose_quat(task.template, obj))
+
+
+def resolve_tasks(scene: Scene, settings: Settings) -> list[TaskSpace]:
+    return [resolve_task(scene, t, settings) for t in scene.tasks]

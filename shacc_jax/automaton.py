@@ -1,0 +1,188 @@
+"""The Automaton rollout of SPEC section 9, for one scene, one start, one task.
+
+The step rule moves p towards c, the closest point of the target's space P_i,
+by at most s = v_max dt per step. For a convex P_i every point of the segment
+[p, c] has the same closest point c, so the path is that straight segment,
+walked in steps of s: p_k = p0 + min(k s, D) u, with D = |c0 - p0|, u the unit
+direction and K = ceil(D / s) the step that lands on c0 (c0 itself from then).
+Outcomes never need the loop of 3 mm steps:
+
+1. Activation (every mode). The set of t with sdf_j(p0 + t u) <= tau is an
+   interval for each convex space j; :func:`shapes.ray_interval` gives a
+   closed-form superset of it. The first sample index inside any superset is
+   a candidate; the exact SDFs at that sample decide. If nothing activates
+   there (the sample fell in the thin rim of a superset), the next candidate
+   is tried. Every sample skipped lies outside every superset, so the first
+   activation found is exactly the step rule's.
+2. Orientation (``shacc`` only). R changes only at samples inside a meta
+   region, which all lie after the first sample inside a superset of a
+   cluster member's initial space. The rate-limited geodesic tracking runs
+   sample by sample from there to the step before activation, exactly as the
+   step rule does, with the meta region tested by the exact SDFs.
+
+The NumPy reference in ``tests/reference_automaton.py`` runs the step rule
+literally; ``tests/test_automaton.py`` checks both agree rollout by rollout.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from . import quaternion as quat
+from . import shapes
+from .meta import meta_target
+from .orientation import task_orientation
+from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG, Spaces
+
+_all_sdf = jax.vmap(shapes.sdf, in_axes=(0, 0, 0, 0, None))
+TIE = 1e-6
+_all_ray = jax.vmap(shapes.ray_interval, in_axes=(0, 0, 0, 0, None, None, None))
+
+
+def rounding_slack(dtype) -> float:
+    """How far the ray intervals are widened beyond tau: covers the rounding of the
+    quadratics (about 1e-7 m in float32 for coordinates of about a metre)."""
+    return 128.0 * float(jnp.finfo(dtype).eps)
+
+
+class Path(NamedTuple):
+    p0: Float[Array, "3"]
+    c0: Float[Array, "3"]
+    u: Float[Array, "3"]
+    length: Float[Array, ""]  # D
+    landing: Float[Array, ""]  # K, as a float (clamped to max_steps + 1)
+    step: Float[Array, ""]  # s = v_max dt
+
+
+def straight_path(spaces: Spaces, target: Int[Array, ""], p0: Float[Array, "3"],
+                  step: Float[Array, ""], max_steps: Array) -> Path:
+    c0 = shapes.project(spaces.kind[target], spaces.center[target], spaces.quat[target],
+                        spaces.dims[target], p0)
+    diff = c0 - p0
+    length = shapes._safe_norm(diff)
+    u = jnp.where(length > 0, diff / jnp.where(length > 0, length, 1.0), 0.0)
+    landing = jnp.minimum(jnp.ceil(length / step), max_steps + 1.0)
+    return Path(p0, c0, u, length, landing, step)
+
+
+def sample(path: Path, k: Float[Array, ""]) -> Float[Array, "3"]:
+    """p_k of the step rule: on the segment, and exactly c0 from step K on."""
+    return jnp.where(k >= path.landing, path.c0, path.p0 + (k * path.step) * path.u)
+
+
+def first_sample(lo: Array, hi: Array, kmin: Array, path: Path, max_steps: Array) -> Array:
+    """First sample index >= kmin whose t = min(k s, D) lies in [lo, hi]; inf if none
+    up to max_steps. Works elementwise (one interval per task)."""
+    inf = jnp.asarray(jnp.inf, path.length.dtype)
+    k1 = jnp.maximum(kmin, jnp.ceil(lo / path.step))
+    on_segment = (k1 < path.landing) & (k1 * path.step <= hi)
+    at_end = (kmin <= path.landing) & (lo <= path.length) & (path.length <= hi)
+    cand = jnp.where(on_segment, k1, jnp.where(at_end, path.landing, inf))
+    return jnp.where(cand <= max_steps, cand, inf)
+
+
+class Activation(NamedTuple):
+    step: Float[Array, ""]  # inf when no activation within max_steps
+    active: Bool[Array, " T"]
+    sdf: Float[Array, " T"]
+
+
+def first_activation(spaces: Spaces, mask: Bool[Array, " T"], path: Path, tau: Array,
+                     max_steps: Array, grow: Array) -> Activation:
+    lo, hi = _all_ray(spaces.kind, spaces.center, spaces.quat, spaces.dims, path.p0, path.u, grow)
+    inf = jnp.asarray(jnp.inf, lo.dtype)
+    lo = jnp.where(mask, lo, inf)
+    hi = jnp.where(mask, hi, -inf)
+    T = mask.shape[0]
+
+    def body(carry):
+        kmin, _, _, _, _ = carry
+        # The landing sample K lies on the target's own space: always a candidate.
+        landing = jnp.where((kmin <= path.landing) & (path.landing <= max_steps),
+                            path.landing, inf)
+        k = jnp.minimum(jnp.min(first_sample(lo, hi, kmin, path, max_steps)), landing)
+        none = ~jnp.isfinite(k)
+        p = sample(path, jnp.where(none, 0.0, k))
+        sd = jnp.where(mask, _all_sdf(spaces.kind, spaces.center, spaces.quat, spaces.dims, p),
+                       inf)
+        active = (sd <= tau) & ~none
+        hit = jnp.any(active)
+        return k + 1.0, hit | none, jnp.where(hit, k, inf), active, sd
+
+    init = (jnp.zeros((), lo.dtype), jnp.zeros((), bool), inf, jnp.zeros(T, bool),
+            jnp.full(T, inf))
+    _, _, k, active, sd = jax.lax.while_loop(lambda c: ~c[1], body, init)
+    return Activation(k, active, sd)
+
+
+class Outcome(NamedTuple):
+    code: Int[Array, ""]
+    activated: Int[Array, ""]
+    step: Int[Array, ""]
+    point: Float[Array, "3"]
+    path_length: Float[Array, ""]
+
+
+def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Array,
+             nearest_rule: Bool[Array, ""]) -> Outcome:
+    """SPEC section 9's outcomes. ``activated`` is the task of A with the smallest
+    sdf, the lower index on a tie, -1 on timeout. Values within ``TIE`` (1e-6 m) of
+    the smallest count as tied: at a landing point on the boundary of two spaces
+    (symmetric scenes) the two sdfs differ only by rounding, and a fixed tolerance
+    makes the choice the same in float32, float64 and the NumPy reference."""
+    found = jnp.isfinite(act.step)
+    smallest = jnp.min(jnp.where(act.active, act.sdf, jnp.inf))
+    tied = act.active & (act.sdf <= smallest + TIE)
+    nearest = jnp.argmax(tied).astype(jnp.int32)  # the first (lowest) index of the tie
+    n_active = jnp.sum(act.active)
+    target_in = act.active[target]
+    code_fail = jnp.where(target_in, jnp.where(n_active == 1, SUCCESS, AMBIGUOUS), WRONG)
+    code_nearest = jnp.where(nearest == target, SUCCESS, WRONG)
+    code = jnp.where(found, jnp.where(nearest_rule, code_nearest, code_fail), TIMEOUT)
+    k = jnp.where(found, act.step, max_steps.astype(act.step.dtype))
+    return Outcome(code.astype(jnp.int32), jnp.where(found, nearest, -1), k.astype(jnp.int32),
+                   sample(path, k), jnp.minimum(k * path.step, path.length))
+
+
+def track_orientation(init: Spaces, opt: Spaces, mask: Bool[Array, " T"],
+                      cluster: Int[Array, " T"], orient, path: Path, r0: Float[Array, "4"],
+                      activation_step: Array, tau: Array, max_angle: Array, max_steps: Array,
+                      grow: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
+    """R at activation (or at timeout) and the number of steps spent in a meta region,
+    for ``shacc``: SPEC section 9's rotation rule at samples 1 .. activation - 1."""
+    member = mask & (cluster >= 0)
+    lo, hi = _all_ray(init.kind, init.center, init.quat, init.dims, path.p0, path.u, grow)
+    inf = jnp.asarray(jnp.inf, lo.dtype)
+    lo = jnp.where(member, lo, inf)
+    hi = jnp.where(member, hi, -inf)
+    one = jnp.ones((), lo.dtype)
+    k_enter = jnp.min(first_sample(lo, hi, one, path, max_steps))
+    k_last = jnp.where(jnp.isfinite(activation_step), activation_step - 1.0,
+                       max_steps.astype(lo.dtype))
+    k_enter = jnp.where(jnp.isfinite(k_enter), k_enter, k_last + 1.0)
+
+    def body(carry):
+        k, r, n = carry
+        p = sample(path, k)
+        inside, target = meta_target(init, opt, mask, cluster, orient, p, tau)
+        r = jnp.where(inside, quat.rotate_towards(r, target, max_angle), r)
+        return k + 1.0, r, n + inside.astype(jnp.int32)
+
+    _, r, n = jax.lax.while_loop(lambda c: c[0] <= k_last, body,
+                                 (k_enter, r0, jnp.zeros((), jnp.int32)))
+    return r, n
+
+
+def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> Array:
+    kind, q_fixed, axis = orient
+    return task_orientation(kind[target], q_fixed[target], axis[target], p)
+
+
+def delta_r(outcome: Outcome, r: Float[Array, "4"], orient, target: Int[Array, ""]) -> Array:
+    """SPEC section 9's delta_R, for successes only (NaN otherwise)."""
+    d = quat.angle(r, target_orientation(orient, target, outcome.point))
+    return jnp.where(outcome.code == SUCCESS, d, jnp.nan)

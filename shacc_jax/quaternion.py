@@ -1,0 +1,131 @@
+"""Quaternion maths, (w, x, y, z), unit norm, q and -q the same rotation (SPEC 2).
+
+Every function works on one quaternion (shape (4,)); batching is vmap's job.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+
+def _eps(x: Array) -> Array:
+    return jnp.finfo(x.dtype).eps
+
+
+# Small matrix products are written as broadcast multiply-sums: XLA fuses them into
+# the surrounding elementwise code, where a batched dot_general of 3x3 or 4x4 matrices
+# becomes one small library call per matrix on CPU (measured: phase 2 of the
+# Automaton went from 2.0 s to 0.1 s on the 12 manual scenes).
+def matvec(m: Array, v: Array) -> Array:
+    return jnp.sum(m * v[None, :], axis=1)
+
+
+def matmul(a: Array, b: Array) -> Array:
+    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
+
+
+def multiply(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, "4"]:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return jnp.stack([
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ])
+
+
+def conjugate(q: Float[Array, "4"]) -> Float[Array, "4"]:
+    return q * jnp.array([1.0, -1.0, -1.0, -1.0], q.dtype)
+
+
+def normalize(q: Float[Array, "4"]) -> Float[Array, "4"]:
+    return q / jnp.maximum(jnp.linalg.norm(q), _eps(q))
+
+
+def to_matrix(q: Float[Array, "4"]) -> Float[Array, "3 3"]:
+    w, x, y, z = q
+    return jnp.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def from_matrix(m: Float[Array, "3 3"]) -> Float[Array, "4"]:
+    """Shepperd's method: the candidate built from the largest of (trace, m00, m11,
+    m22) is well conditioned; the others are computed on clamped arguments so no
+    branch ever takes the square root of a negative number (NaN-free gradients)."""
+    t = m[0, 0] + m[1, 1] + m[2, 2]
+    cands = jnp.stack([
+        jnp.stack([1 + t, m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]),
+        jnp.stack([m[2, 1] - m[1, 2], 1 + m[0, 0] - m[1, 1] - m[2, 2],
+                   m[0, 1] + m[1, 0], m[0, 2] + m[2, 0]]),
+        jnp.stack([m[0, 2] - m[2, 0], m[0, 1] + m[1, 0],
+                   1 - m[0, 0] + m[1, 1] - m[2, 2], m[1, 2] + m[2, 1]]),
+        jnp.stack([m[1, 0] - m[0, 1], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1],
+                   1 - m[0, 0] - m[1, 1] + m[2, 2]]),
+    ])
+    diag = jnp.stack([t, m[0, 0], m[1, 1], m[2, 2]])
+    k = jnp.argmax(diag)
+    q = cands[k]
+    q = q / (2.0 * jnp.sqrt(jnp.maximum(cands[k, k], _eps(m))))
+    return normalize(q * jnp.where(q[0] < 0, -1.0, 1.0))
+
+
+def angle(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, ""]:
+    """SPEC section 2: 2 arccos(min(1, |<a, b>|))."""
+    return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(jnp.dot(a, b))))
+
+
+def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
+                   max_angle: Float[Array, ""]) -> Float[Array, "4"]:
+    """Rotate ``q`` towards ``target`` along the geodesic by at most ``max_angle``
+    (slerp); reaches ``target`` when it is within ``max_angle``.
+
+    At exactly opposite orientations (angle pi, <q, target> = 0) the two geodesics
+    turn about +v and -v, v the relative rotation's axis in the EE frame. The tie
+    is broken towards a positive turn about the EE's x axis (v . x > 0; then y,
+    then z where v . x = 0): our reading of SPEC section 9's rule.
+    """
+    d = jnp.dot(q, target)
+    rel = multiply(conjugate(q), target)
+    v = rel[1:]
+    tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
+                         jnp.where(v[1] != 0, jnp.sign(v[1]), jnp.where(v[2] < 0, -1.0, 1.0)))
+    sign = jnp.where(jnp.abs(d) > 8 * _eps(q), jnp.sign(d), tie_sign)
+    t = target * sign
+    cos_half = jnp.minimum(1.0, jnp.abs(d))
+    half = jnp.arccos(cos_half)  # half the rotation angle
+    theta = 2.0 * half
+    frac = jnp.clip(max_angle / jnp.where(theta > 0, theta, 1.0), 0.0, 1.0)
+    sin_half = jnp.sin(half)
+    safe = sin_half > 8 * _eps(q)
+    s = jnp.where(safe, sin_half, 1.0)
+    a = jnp.where(safe, jnp.sin((1.0 - frac) * half) / s, 1.0 - frac)
+    b = jnp.where(safe, jnp.sin(frac * half) / s, frac)
+    stepped = normalize(a * q + b * t)
+    return jnp.where(theta <= max_angle, t, stepped)
+
+
+def markley_average(quats: Float[Array, "n 4"], weights: Float[Array, " n"],
+                    squarings: int = 24) -> Float[Array, "4"]:
+    """Weighted quaternion average of Markley et al. 2007 (SPEC section 8): the unit
+    eigenvector of the largest eigenvalue of M = sum_i w_i q_i q_i^T.
+
+    Sign-invariant (q q^T is) and linear in the weights. The eigenvector comes from
+    repeated squaring: P <- P^2 / tr(P^2) converges to the projector v v^T at a rate
+    (lambda_2 / lambda_1)^(2^k); 24 squarings leave (1 - 1e-6)^(1.7e7) < 1e-7 for any
+    gap float32 can resolve. It is one fused chain of 4x4 products, several times
+    faster on CPU than a batched ``eigh`` (LAPACK one matrix at a time), and is
+    checked against scipy's Rotation.mean in tests/test_quaternion.py.
+    """
+    m = jnp.sum(weights[:, None, None] * quats[:, :, None] * quats[:, None, :], axis=0)
+    p = m / jnp.maximum(jnp.trace(m), _eps(m))
+    for _ in range(squarings):
+        p = matmul(p, p)
+        p = p / jnp.maximum(jnp.trace(p), _eps(m))
+    col = jnp.argmax(jnp.diagonal(p))
+    q = normalize(p[:, col])
+    return q * jnp.where(q[0] < 0, -1.0, 1.0)

@@ -1,0 +1,232 @@
+"""Exact signed distances, closest points and ray intervals of the four shapes
+(SPEC section 4), for one point and one shape; batching is vmap's job.
+
+Kinds: 0 cylinder, 1 disk (a cylinder to the maths), 2 cone, 3 box, with the
+dims of ``geometry_precompute.shapes``. The per-kind formulas are all
+evaluated and the right one selected with ``where`` (STYLE: one vectorised
+block rather than a switch); every formula is NaN-free for any positive dims,
+so the unselected branches never poison a gradient.
+
+Cylinders and cones are bodies of revolution: their distance is the 2-D
+distance in the meridian half-plane (rho, z) to the rectangle or triangle of
+their cross-section, and their closest point maps back along the point's
+azimuth. On the axis (rho = 0) the closest point of an outside point is itself
+on the axis, so the azimuth never matters.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from . import quaternion as quat
+
+CYLINDER, DISK, CONE, BOX = 0, 1, 2, 3
+
+
+def _safe_norm(v: Array) -> Array:
+    """|v| with a zero (not NaN) gradient at v = 0 (the double-where trick)."""
+    sq = jnp.sum(v * v)
+    nz = sq > 0
+    return jnp.where(nz, jnp.sqrt(jnp.where(nz, sq, 1.0)), 0.0)
+
+
+def _cone_angle(alpha: Array) -> Array:
+    # Keeps the cone branch finite when it is evaluated on another kind's dims.
+    return jnp.clip(alpha, 1e-3, 1.5)
+
+
+def _cylinder_local(p: Array, r: Array, h: Array) -> tuple[Array, Array]:
+    rho = _safe_norm(p[:2])
+    dr = rho - r
+    dz = jnp.abs(p[2]) - h / 2
+    out = _safe_norm(jnp.stack([jnp.maximum(dr, 0.0), jnp.maximum(dz, 0.0)]))
+    sdf = out + jnp.minimum(jnp.maximum(dr, dz), 0.0)
+    scale = jnp.where(rho > r, r / jnp.where(rho > 0, rho, 1.0), 1.0)
+    proj = jnp.stack([p[0] * scale, p[1] * scale, jnp.clip(p[2], -h / 2, h / 2)])
+    return sdf, proj
+
+
+def _cone_local(p: Array, length: Array, alpha: Array) -> tuple[Array, Array]:
+    alpha = _cone_angle(alpha)
+    radius = length * jnp.tan(alpha)
+    rho = _safe_norm(p[:2])
+    z = p[2]
+    # Lateral segment (0, 0) -> (radius, length) of the meridian triangle.
+    seg2 = radius * radius + length * length
+    t = jnp.clip((rho * radius + z * length) / seg2, 0.0, 1.0)
+    lat = jnp.stack([t * radius, t * length])
+    # Base segment (0, length) -> (radius, length).
+    base = jnp.stack([jnp.clip(rho, 0.0, radius), length])
+    q2 = jnp.stack([rho, z])
+    d_lat = _safe_norm(q2 - lat)
+    d_base = _safe_norm(q2 - base)
+    inside = (z <= length) & (rho * jnp.cos(alpha) <= z * jnp.sin(alpha))
+    dist = jnp.minimum(d_lat, d_base)
+    sdf = jnp.where(inside, -dist, dist)
+    near = jnp.where(d_lat <= d_base, lat, base)
+    dir_xy = jnp.where(rho > 0, p[:2] / jnp.where(rho > 0, rho, 1.0), jnp.zeros(2, p.dtype))
+    proj_out = jnp.concatenate([dir_xy * near[0], near[1:]])
+    return sdf, jnp.where(inside, p, proj_out)
+
+
+def _box_local(p: Array, e: Array) -> tuple[Array, Array]:
+    q = jnp.abs(p) - e
+    sdf = _safe_norm(jnp.maximum(q, 0.0)) + jnp.minimum(jnp.max(q), 0.0)
+    return sdf, jnp.clip(p, -e, e)
+
+
+def to_local(p: Float[Array, "3"], center: Float[Array, "3"], q: Float[Array, "4"]) -> Array:
+    return quat.matvec(quat.to_matrix(q).T, p - center)
+
+
+def sdf_and_project_local(kind: Int[Array, ""], dims: Float[Array, "3"],
+                          p: Float[Array, "3"]) -> tuple[Array, Array]:
+    s_cyl, p_cyl = _cylinder_local(p, dims[0], dims[1])
+    s_cone, p_cone = _cone_local(p, dims[0], dims[1])
+    s_box, p_box = _box_local(p, dims)
+    is_cone = kind == CONE
+    is_box = kind == BOX
+    sdf = jnp.where(is_box, s_box, jnp.where(is_cone, s_cone, s_cyl))
+    proj = jnp.where(is_box, p_box, jnp.where(is_cone, p_cone, p_cyl))
+    return sdf, proj
+
+
+def sdf(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, ""]:
+    """Exact Euclidean signed distance (negative inside) of a posed shape."""
+    return sdf_and_project_local(kind, dims, to_local(p, center, q))[0]
+
+
+def project(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, "3"]:
+    """Closest point of the (solid) shape to ``p``; ``p`` itself when inside."""
+    rot = quat.to_matrix(q)
+    local = sdf_and_project_local(kind, dims, quat.matvec(rot.T, p - center))[1]
+    return center + quat.matvec(rot, local)
+
+
+# --------------------------------------------------------------------------------------
+# Ray intervals: a superset of {t : sdf(o + t d) <= tau} for a unit direction d.
+#
+# The shape inflated by tau (a Minkowski sum with a ball) is contained in the shape
+# with every face moved out by tau (for the cone: apex moved back by tau / sin(alpha)
+# along the axis, base moved out by tau). Those sharp shapes are intersections of
+# slabs and quadrics, whose ray intervals are closed-form. ``slack`` widens them a
+# little more so that rounding in the quadratics never loses a point (the Automaton
+# verifies every candidate with the exact SDF, so a superset is all that is needed).
+# --------------------------------------------------------------------------------------
+
+
+def _slab(o: Array, d: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+    big = jnp.asarray(jnp.inf, o.dtype)
+    par = jnp.abs(d) < 1e-12
+    ds = jnp.where(par, 1.0, d)
+    t1, t2 = (lo - o) / ds, (hi - o) / ds
+    inside = (o >= lo) & (o <= hi)
+    a = jnp.where(par, jnp.where(inside, -big, big), jnp.minimum(t1, t2))
+    b = jnp.where(par, jnp.where(inside, big, -big), jnp.maximum(t1, t2))
+    return a, b
+
+
+def _quadratic_ge0(A: Array, B: Array, C: Array) -> tuple[Array, Array, Array, Array]:
+    """{t : A t^2 + 2 B t + C >= 0} as the union of (-inf, r1] and [r2, inf) when A > 0,
+    or the interval [r1, r2] when A < 0; returned as (lo1, hi1, lo2, hi2) of two
+    intervals (the second empty where unused)."""
+    inf = jnp.asarray(jnp.inf, A.dtype)
+    disc = B * B - A * C
+    sq = jnp.sqrt(jnp.maximum(disc, 0.0))
+    # Stable roots: q = -(B + sign(B) sqrt(disc)), roots q / A and C / q.
+    qv = -(B + jnp.where(B >= 0, 1.0, -1.0) * sq)
+    qs = jnp.where(qv == 0, 1.0, qv)
+    As = jnp.where(A == 0, 1.0, A)
+    r_a = jnp.where(qv == 0, 0.0, qv / As)
+    r_b = jnp.where(qv == 0, 0.0, C / qs)
+    r1, r2 = jnp.minimum(r_a, r_b), jnp.maximum(r_a, r_b)
+    lin = jnp.abs(A) < 1e-9
+    # Linear case 2 B t + C >= 0.
+    Bs = jnp.where(B == 0, 1.0, B)
+    root = -C / (2 * Bs)
+    lin_lo = jnp.where(B == 0, jnp.where(C >= 0, -inf, inf), jnp.where(B > 0, root, -inf))
+    lin_hi = jnp.where(B == 0, jnp.where(C >= 0, inf, -inf), jnp.where(B > 0, inf, root))
+    pos = A > 0
+    has_roots = disc >= 0
+    lo1 = jnp.where(lin, lin_lo, jnp.where(pos, -inf, jnp.where(has_roots, r1, inf)))
+    hi1 = jnp.where(lin, lin_hi, jnp.where(pos, jnp.where(has_roots, r1, inf),
+                                           jnp.where(has_roots, r2, -inf)))
+    lo2 = jnp.where(lin | ~pos, inf, jnp.where(has_roots, r2, inf))
+    hi2 = jnp.where(lin | ~pos, -inf, inf)
+    return lo1, hi1, lo2, hi2
+
+
+def _cap(a1, b1, a2, b2):
+    return jnp.maximum(a1, a2), jnp.minimum(b1, b2)
+
+
+def _hull_of_two(a1, b1, a2, b2):
+    """Convex hull of two intervals, either possibly empty (lo > hi)."""
+    e1, e2 = a1 > b1, a2 > b2
+    lo = jnp.where(e1, a2, jnp.where(e2, a1, jnp.minimum(a1, a2)))
+    hi = jnp.where(e1, b2, jnp.where(e2, b1, jnp.maximum(b1, b2)))
+    return lo, hi
+
+
+def _ray_cylinder(o, d, r, h, grow):
+    R = r + grow
+    A = d[0] ** 2 + d[1] ** 2
+    B = o[0] * d[0] + o[1] * d[1]
+    C = o[0] ** 2 + o[1] ** 2 - R * R
+    # Inside the infinite cylinder: -(A t^2 + 2 B t + C) >= 0.
+    lo1, hi1, lo2, hi2 = _quadratic_ge0(-A, -B, -C)
+    a, b = _hull_of_two(lo1, hi1, lo2, hi2)
+    za, zb = _slab(o[2], d[2], -h / 2 - grow, h / 2 + grow)
+    return _cap(a, b, za, zb)
+
+
+def _ray_cone(o, d, length, alpha, grow):
+    alpha = _cone_angle(alpha)
+    z0 = -grow / jnp.sin(alpha)
+    oz = o[2] - z0
+    k2 = jnp.tan(alpha) ** 2
+    A = k2 * d[2] ** 2 - d[0] ** 2 - d[1] ** 2
+    B = k2 * oz * d[2] - o[0] * d[0] - o[1] * d[1]
+    C = k2 * oz * oz - o[0] ** 2 - o[1] ** 2
+    lo1, hi1, lo2, hi2 = _quadratic_ge0(A, B, C)
+    # Keep the upper nappe (z >= z0) and the base slab; hull of what is left.
+    za, zb = _slab(o[2], d[2], z0, length + grow)
+    a1, b1 = _cap(lo1, hi1, za, zb)
+    a2, b2 = _cap(lo2, hi2, za, zb)
+    return _hull_of_two(a1, b1, a2, b2)
+
+
+def _ray_box(o, d, e, grow):
+    a, b = _slab(o, d, -e - grow, e + grow)
+    return jnp.max(a), jnp.min(b)
+
+
+def ray_interval(kind, center, q, dims, origin: Float[Array, "3"], direction: Float[Array, "3"],
+                 grow: Float[Array, ""]) -> tuple[Array, Array]:
+    """(lo, hi) containing every t with sdf(origin + t direction) <= ``grow``-ish: the
+    exact tau-sublevel set lies inside it whenever ``grow`` >= tau + rounding slack.
+    Empty when lo > hi."""
+    rot = quat.to_matrix(q)
+    o = quat.matvec(rot.T, origin - center)
+    d = quat.matvec(rot.T, direction)
+    # Re-centre the ray at its point closest to the local origin: the quadratics'
+    # coefficients then scale with the ray's distance from the shape, not from the
+    # start, and their cancellation error shrinks accordingly (a float32 ray through
+    # a cone's apex 0.8 m away lost its whole interval without this).
+    t0 = -jnp.dot(o, d)
+    o = o + t0 * d
+    a_c, b_c = _ray_cylinder(o, d, dims[0], dims[1], grow)
+    a_k, b_k = _ray_cone(o, d, dims[0], dims[1], grow)
+    a_b, b_b = _ray_box(o, d, dims, grow)
+    is_cone, is_box = kind == CONE, kind == BOX
+    lo = jnp.where(is_box, a_b, jnp.where(is_cone, a_k, a_c))
+    hi = jnp.where(is_box, b_b, jnp.where(is_cone, b_k, b_c))
+    return lo + t0, hi + t0
+
+
+def volume(kind, dims: Float[Array, "3"]) -> Float[Array, ""]:
+    cyl = jnp.pi * dims[0] ** 2 * dims[1]
+    cone = jnp.pi / 3.0 * (dims[0] * jnp.tan(_cone_angle(dims[1]))) ** 2 * dims[0]
+    box = 8.0 * dims[0] * dims[1] * dims[2]
+    return jnp.where(kind == BOX, box, jnp.where(kind == CONE, cone, cyl))

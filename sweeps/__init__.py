@@ -1,0 +1,1 @@
+"""Command line, experiments and sweeps of the ShaCC evaluator."""

@@ -1,0 +1,199 @@
+"""A plain NumPy Automaton: SPEC section 9's step rule, written as literally as
+possible, in float64, with scipy for every rotation. It shares no code with
+``shacc_jax``; the tests compare the two rollout by rollout.
+
+Obvious over fast: one rollout at a time, one step at a time, every SDF
+recomputed every step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from geometry_precompute.frames import frame_from_approach
+
+OUTCOME_NAMES = ("success", "wrong", "ambiguous", "timeout")
+
+
+TIE = 1e-6  # sdf values within a micrometre are a tie (lower task index wins)
+
+
+def _rot(q):  # (w, x, y, z) -> scipy Rotation
+    q = np.asarray(q, float)
+    return Rotation.from_quat([q[1], q[2], q[3], q[0]])
+
+
+# --- shapes: closest point (solid) and signed distance, the obvious way -------------
+# Scalar Python maths on purpose: it is the reference, and for single points it is
+# several times faster than small NumPy arrays.
+
+
+def _closest_on_segment(px, pz, ax, az, bx, bz):
+    abx, abz = bx - ax, bz - az
+    t = ((px - ax) * abx + (pz - az) * abz) / (abx * abx + abz * abz)
+    t = min(1.0, max(0.0, t))
+    return ax + t * abx, az + t * abz
+
+
+def local_sdf_project(kind, dims, x, y, z):
+    """Signed distance and closest point (x, y, z) in the shape's local frame."""
+    a, b, c = dims
+    rho = math.hypot(x, y)
+
+    def from_meridian(r_new, z_new):
+        if rho == 0.0:
+            return (r_new, 0.0, z_new)
+        return (x / rho * r_new, y / rho * r_new, z_new)
+
+    if kind in (0, 1):  # cylinder / disk: the meridian rectangle [0, r] x [-h/2, h/2]
+        if rho <= a and abs(z) <= b / 2:
+            return -min(a - rho, b / 2 - abs(z)), (x, y, z)
+        q = from_meridian(min(rho, a), min(b / 2, max(-b / 2, z)))
+        return math.dist((x, y, z), q), q
+    if kind == 2:  # cone: meridian triangle apex (0,0), rim (R, L), base centre (0, L)
+        length, alpha = a, b
+        radius = length * math.tan(alpha)
+        lat = _closest_on_segment(rho, z, 0.0, 0.0, radius, length)
+        base = _closest_on_segment(rho, z, 0.0, length, radius, length)
+        d_lat = math.hypot(rho - lat[0], z - lat[1])
+        d_base = math.hypot(rho - base[0], z - base[1])
+        if 0.0 <= z <= length and rho <= z * math.tan(alpha):
+            return -min(d_lat, d_base), (x, y, z)
+        near = lat if d_lat <= d_base else base
+        return min(d_lat, d_base), from_meridian(*near)
+    q = (min(a, max(-a, x)), min(b, max(-b, y)), min(c, max(-c, z)))  # box
+    if abs(x) <= a and abs(y) <= b and abs(z) <= c:
+        return -min(a - abs(x), b - abs(y), c - abs(z)), (x, y, z)
+    return math.dist((x, y, z), q), q
+
+
+class Space:
+    def __init__(self, kind, center, quat, dims):
+        self.kind = int(kind)
+        self.center = np.asarray(center, float)
+        self.rot = _rot(quat).as_matrix()
+        self.dims = tuple(float(v) for v in dims)
+
+    def _local(self, p):
+        return self.rot.T @ (np.asarray(p) - self.center)
+
+    def sdf(self, p):
+        return local_sdf_project(self.kind, self.dims, *self._local(p))[0]
+
+    def project(self, p):
+        q = local_sdf_project(self.kind, self.dims, *self._local(p))[1]
+        return self.rot @ np.array(q) + self.center
+
+
+# --- orientation -----------------------------------------------------------------------
+
+
+def task_rotation(orient_kind, orient_quat, axis, p) -> Rotation:
+    if orient_kind == 1:
+        v = np.array([axis[0] - p[0], axis[1] - p[1], 0.0])
+        if np.hypot(v[0], v[1]) > 1e-9:
+            return Rotation.from_matrix(frame_from_approach(v))
+    return _rot(orient_quat)
+
+
+def rotate_towards(r: Rotation, target: Rotation, max_angle: float) -> Rotation:
+    rel = r.inv() * target  # in the EE frame
+    rotvec = rel.as_rotvec()
+    angle = np.linalg.norm(rotvec)
+    if angle <= max_angle:
+        return target
+    axis = rotvec / angle
+    if abs(angle - np.pi) < 1e-9:  # opposite: turn positively about EE x (then y, z)
+        for k in range(3):
+            if axis[k] != 0:
+                axis = axis * np.sign(axis[k])
+                break
+    return r * Rotation.from_rotvec(axis * max_angle)
+
+
+def angle_between(r1: Rotation, r2: Rotation) -> float:
+    q1, q2 = r1.as_quat(), r2.as_quat()
+    return 2.0 * np.arccos(min(1.0, abs(float(np.dot(q1, q2)))))
+
+
+# --- the rollout -----------------------------------------------------------------------
+
+
+@dataclass
+class Result:
+    outcome: str
+    activated: int
+    step: int
+    point: np.ndarray
+    delta_R: float
+    meta_steps: int
+    path_length: float
+
+
+def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
+    """One rollout from baked arrays (float64), SPEC section 9 step by step."""
+    T = int(baked.task_mask[scene].sum())
+    which = "init" if mode == "baseline" else "opt"
+
+    def spaces(w):
+        return [Space(int(baked.kind[scene, j]), getattr(baked, f"center_{w}")[scene, j],
+                      getattr(baked, f"quat_{w}")[scene, j], getattr(baked, f"dims_{w}")[scene, j])
+                for j in range(T)]
+
+    active = spaces(which)
+    init, opt = spaces("init"), spaces("opt")
+    cluster = baked.cluster[scene, :T]
+    orient = [(int(baked.orient_kind[scene, j]), baked.orient_quat[scene, j],
+               baked.orient_axis[scene, j]) for j in range(T)]
+    dt, v_max = float(baked.dt[scene]), float(baked.v_max[scene])
+    omega, tau = float(baked.omega_max[scene]), float(baked.activation_tol[scene])
+    max_steps = int(baked.max_steps[scene])
+    nearest_rule = bool(baked.ambiguity_nearest[scene])
+    start_pose = baked.starts[scene, start]
+    p = start_pose[:3].astype(float).copy()
+    r = _rot(start_pose[3:])
+    travelled, meta_steps = 0.0, 0
+
+    def check(p):
+        sd = np.array([s.sdf(p) for s in active])
+        return sd, np.flatnonzero(sd <= tau)
+
+    sd, act = check(p)
+    step = 0
+    while act.size == 0 and step < max_steps:
+        step += 1
+        c = active[target].project(p)
+        gap = np.linalg.norm(c - p)
+        move = (c - p) * (min(1.0, v_max * dt / gap) if gap > 0 else 0.0)
+        p = p + move
+        travelled += float(np.linalg.norm(move))
+        sd, act = check(p)
+        if act.size:
+            break
+        if mode == "shacc":
+            sd_init = np.array([s.sdf(p) for s in init])
+            inside = [j for j in range(T) if cluster[j] >= 0 and sd_init[j] <= tau]
+            if inside:
+                j0 = min(inside, key=lambda j: (sd_init[j], j))
+                members = [j for j in range(T) if cluster[j] == cluster[j0]]
+                d = np.array([max(opt[j].sdf(p), 1e-6) for j in members])
+                w = (1.0 / d**2) / np.sum(1.0 / d**2)
+                rots = Rotation.concatenate([task_rotation(*orient[j], p) for j in members])
+                r = rotate_towards(r, rots.mean(weights=w), omega * dt)
+                meta_steps += 1
+    if act.size == 0:
+        return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled)
+    smallest = min(sd[j] for j in act)
+    nearest = int(min(j for j in act if sd[j] <= smallest + TIE))
+    if nearest_rule:
+        outcome = "success" if nearest == target else "wrong"
+    elif target in act:
+        outcome = "success" if act.size == 1 else "ambiguous"
+    else:
+        outcome = "wrong"
+    dr = angle_between(r, task_rotation(*orient[target], p)) if outcome == "success" else np.nan
+    return Result(outcome, nearest, step, p, dr, meta_steps, travelled)
