@@ -2,7 +2,7 @@
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-SCENE ?= geometry_precompute/scenes/03_three_mugs_row_tight.toml
+SCENE ?= geometry_precompute/scenes/09_mug_behind_two.toml
 
 .PHONY: demo test lint bench clean
 

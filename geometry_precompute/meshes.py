@@ -43,7 +43,7 @@ def shape_manifold(shape: Shape, sections: int) -> m3.Manifold:
 
 
 def manifold_to_trimesh(m: m3.Manifold) -> trimesh.Trimesh:
-    mesh = m.to_mesh()
+    mesh = m.to_mesh64()
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3],
                            np.asarray(mesh.tri_verts), process=False)
 

@@ -31,9 +31,10 @@ def _above_min(q: np.ndarray, space: TaskSpace) -> bool:
 
 
 def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 1000,
-           space_set: SpaceSet | None = None) -> ShrinkResult:
+           space_set: SpaceSet | None = None, history: list | None = None) -> ShrinkResult:
     """Run SPEC section 7's loop. ``space_set`` (the initial spaces' coal objects) is
-    reused and updated in place when given."""
+    reused and updated in place when given; ``history``, when given, receives a copy
+    of every task's parameters after each pass."""
     q = [s.q_init.copy() for s in spaces]
     coll = space_set if space_set is not None else SpaceSet([s.shape() for s in spaces])
     iterations = 0
@@ -51,5 +52,7 @@ def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 100
             q[i] = np.maximum(s.q_min, q[i] - sigma * (s.q_init - s.q_min))
             coll.update(i, s.shape(q[i]))
         iterations += 1
+        if history is not None:
+            history.append([x.copy() for x in q])
     still = [(i, j) for i, j in coll.candidate_pairs() if coll.intersects(i, j)]
     return ShrinkResult(q, iterations, still)

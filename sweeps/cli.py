@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from geometry_precompute import InputError, load_scene, precompute
 from geometry_precompute.settings import parse_cli_value
 
+from .evaluate_cmd import add_evaluate
 from .output import precompute_json, write_json
 
 
@@ -65,7 +66,7 @@ def cmd_precompute(args) -> int:
     wall = time.perf_counter() - t0
     print_precompute(r, wall)
     if args.json:
-        write_json(args.json, {**precompute_json(r), "settings": settings.to_dict()})
+        write_json(args.json, precompute_json(r))
         print(f"wrote {args.json}")
     return 0
 
@@ -79,12 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override a setting (SPEC section 16 names)")
     pre.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
     pre.set_defaults(func=cmd_precompute)
-    try:
-        from .evaluate_cmd import add_evaluate
-    except ImportError:  # the JAX half is optional for precompute-only use
-        pass
-    else:
-        add_evaluate(sub)
+    add_evaluate(sub)
     return p
 
 

@@ -1,0 +1,36 @@
+"""Shared fixtures: the shipped scenes, precomputed and baked once per session."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import settings
+
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
+
+settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)
+settings.load_profile("shacc")
+
+
+@pytest.fixture(scope="session")
+def shipped_results():
+    from geometry_precompute import load_scene, precompute, shipped_scene_paths
+
+    return [precompute(load_scene(p)) for p in shipped_scene_paths()]
+
+
+@pytest.fixture(scope="session")
+def shipped_bake(shipped_results):
+    from geometry_precompute import bake
+
+    return bake(shipped_results)
+
+
+def write_scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path

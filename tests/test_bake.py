@@ -1,0 +1,67 @@
+"""The bake: fixed shapes, padding, masks, clusters, settings per scene."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry_precompute import InputError, bake, precompute, random_scene
+from geometry_precompute.bake import ARRAY_FIELDS, PARAM_FIELDS
+from geometry_precompute.settings import DEFAULTS
+
+
+def test_bake_shapes_and_padding(shipped_results):
+    b = bake(shipped_results[:3], max_tasks=5)
+    S, T, N = 3, 5, 36
+    assert b.task_mask.shape == (S, T) and b.starts.shape == (S, N, 7)
+    assert b.center_init.shape == (S, T, 3) and b.quat_opt.shape == (S, T, 4)
+    assert b.task_mask[:, :3].all() and not b.task_mask[:, 3:].any()
+    assert (b.cluster[:, 3:] == -1).all()
+    for k in ARRAY_FIELDS + PARAM_FIELDS:
+        assert np.all(np.isfinite(getattr(b, k).astype(float))), k
+    np.testing.assert_allclose(np.linalg.norm(b.quat_init, axis=-1), 1.0)
+
+
+def test_bake_values_follow_results(shipped_results):
+    b = bake(shipped_results)
+    for s, r in enumerate(shipped_results):
+        for t, (si, so) in enumerate(zip(r.shapes_init, r.shapes_opt, strict=True)):
+            np.testing.assert_allclose(b.dims_init[s, t], si.dims)
+            np.testing.assert_allclose(b.dims_opt[s, t], so.dims)
+            np.testing.assert_allclose(b.center_opt[s, t], so.center)
+        labels = b.cluster[s, : len(r.spaces)]
+        for k, members in enumerate(r.meta_clusters()):
+            assert (labels[members] == k).all()
+        singles = [c[0] for c in r.clusters if len(c) == 1]
+        assert (labels[singles] == -1).all()
+    assert np.all(b.dt == DEFAULTS["dt"]) and np.all(b.max_steps == DEFAULTS["max_steps"])
+
+
+def test_settings_become_per_scene_arrays():
+    scene = random_scene(1, "uniform", 5, 5)
+    r1 = precompute(scene, DEFAULTS)
+    r2 = precompute(scene, DEFAULTS.with_overrides({"v_max": 0.3, "ambiguity": "nearest"}))
+    b = bake([r1, r2])
+    assert b.v_max.tolist() == [0.15, 0.3]
+    assert b.ambiguity_nearest.tolist() == [False, True]
+
+
+def test_bake_rejects_bad_input(shipped_results):
+    with pytest.raises(InputError, match="max_tasks"):
+        bake(shipped_results[:1], max_tasks=2)
+    starts = np.zeros((4, 7))
+    starts[:, 3] = 1.0
+    starts[2, 3:] = 0.0
+    with pytest.raises(InputError, match="zero quaternion"):
+        bake(shipped_results[:1], starts=starts)
+    small = precompute(shipped_results[0].scene,
+                       shipped_results[0].settings.with_overrides({"start_grid": [2, 2]}))
+    with pytest.raises(InputError, match="same number of start poses"):
+        bake([shipped_results[0], small])
+
+
+def test_explicit_starts_are_normalised(shipped_results):
+    starts = np.array([[-0.5, 0.0, 0.1, 2.0, 0.0, 0.0, 0.0]])
+    b = bake(shipped_results[:2], starts=starts)
+    assert b.starts.shape == (2, 1, 7)
+    np.testing.assert_allclose(b.starts[:, 0, 3:], [[1, 0, 0, 0]] * 2)

@@ -1,0 +1,176 @@
+"""Quaternions, orientation spaces and the meta skill against scipy and the CPU frames."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from geometry_precompute.frames import frame_from_approach as cpu_frame
+from shacc_jax import quaternion as quat
+from shacc_jax.meta import meta_target, meta_weights
+from shacc_jax.orientation import frame_from_approach, task_orientation
+from shacc_jax.types import Spaces
+
+
+def wxyz(r: Rotation) -> np.ndarray:
+    q = r.as_quat()
+    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+def angle_np(a, b) -> float:
+    """Rotation angle between two quaternions, computed stably (2 arcsin of half the
+    chord, not arccos of a dot product near 1, which loses half the digits)."""
+    a = np.asarray(a, np.float64) / np.linalg.norm(a)
+    b = np.asarray(b, np.float64) / np.linalg.norm(b)
+    chord = min(np.linalg.norm(a - b), np.linalg.norm(a + b))
+    return 4 * np.arcsin(min(1.0, chord / 2))
+
+
+average = jax.jit(quat.markley_average)
+
+
+@given(st.integers(0, 10_000), st.integers(2, 9))
+def test_markley_matches_scipy_mean(seed, n):
+    rng = np.random.default_rng(seed)
+    rots = Rotation.random(n, rng=rng)
+    # Keep the set within a hemisphere-ish spread so the top eigenvalue is well separated
+    # (with a degenerate eigenvalue any unit vector of the eigenspace is "the" mean).
+    base = Rotation.random(rng=rng)
+    rots = base * Rotation.from_rotvec(rots.as_rotvec() * 0.4)
+    w = rng.uniform(0.05, 1.0, n)
+    signs = rng.choice([-1.0, 1.0], size=(n, 1))  # antipodal inputs: q and -q
+    q = wxyz(rots) * signs
+    expected = wxyz(rots.mean(weights=w))
+    with jax.enable_x64(True):
+        got = np.asarray(average(jnp.asarray(q), jnp.asarray(w / w.sum())))
+    assert angle_np(got, expected) < 1e-5
+    got32 = np.asarray(average(jnp.asarray(q, jnp.float32), jnp.asarray(w / w.sum(),
+                                                                        jnp.float32)))
+    assert angle_np(got32, expected) < 1e-3
+
+
+@given(st.integers(0, 10_000))
+def test_markley_sign_invariance_and_linear_weights(seed):
+    rng = np.random.default_rng(seed)
+    q = wxyz(Rotation.random(4, rng=rng))
+    w = rng.uniform(0.1, 1.0, 4)
+    with jax.enable_x64(True):
+        a = np.asarray(average(jnp.asarray(q), jnp.asarray(w)))
+        b = np.asarray(average(jnp.asarray(-q), jnp.asarray(3.0 * w)))
+    assert angle_np(a, b) < 1e-9
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_average_of_copies_is_that_quaternion(n):
+    q0 = wxyz(Rotation.from_rotvec([0.3, -1.2, 2.0]))
+    qs = np.tile(q0, (n, 1)) * np.array([1, -1, 1, -1, 1][:n])[:, None]
+    got = np.asarray(average(jnp.asarray(qs, jnp.float32), jnp.full(n, 1.0 / n, jnp.float32)))
+    assert angle_np(got, q0) < 1e-3
+
+
+def test_zero_weight_is_ignored():
+    qs = wxyz(Rotation.from_rotvec([[0, 0, 0.5], [1.0, 0, 0], [0, 2.0, 0]]))
+    got = np.asarray(average(jnp.asarray(qs), jnp.array([0.0, 1.0, 0.0])))
+    assert angle_np(got, qs[1]) < 1e-5
+
+
+@given(st.integers(0, 10_000), st.floats(0.01, 0.5))
+def test_rotate_towards(seed, step):
+    rng = np.random.default_rng(seed)
+    a, b = wxyz(Rotation.random(2, rng=rng))
+    f = jax.jit(quat.rotate_towards)
+    theta = angle_np(a, b)
+    out = np.asarray(f(jnp.asarray(a), jnp.asarray(b), step))
+    if theta <= step:
+        assert angle_np(out, b) < 1e-5
+    else:
+        assert angle_np(out, a) == pytest.approx(step, abs=1e-4)
+        assert angle_np(out, b) == pytest.approx(theta - step, abs=1e-4)  # on the geodesic
+
+
+def test_rotate_opposite_turns_about_ee_x():
+    a = wxyz(Rotation.from_rotvec([0.2, 0.4, -0.3]))
+    b = wxyz(Rotation.from_quat(np.r_[a[1:], a[:1]]) * Rotation.from_rotvec([np.pi, 0, 0]))
+    out = np.asarray(quat.rotate_towards(jnp.asarray(a), jnp.asarray(b), 0.1))
+    ra = Rotation.from_quat(np.r_[a[1:], a[:1]])
+    rel = (ra.inv() * Rotation.from_quat(np.r_[out[1:], out[:1]])).as_rotvec()
+    np.testing.assert_allclose(rel, [0.1, 0.0, 0.0], atol=1e-5)
+
+
+@given(st.integers(0, 10_000))
+def test_from_matrix_round_trip(seed):
+    r = Rotation.random(rng=np.random.default_rng(seed))
+    q = np.asarray(quat.from_matrix(jnp.asarray(r.as_matrix(), jnp.float32)))
+    assert angle_np(q, wxyz(r)) < 1e-3
+    np.testing.assert_allclose(np.asarray(quat.to_matrix(jnp.asarray(q))), r.as_matrix(),
+                               atol=1e-5)
+
+
+@given(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1))
+def test_frame_from_approach_matches_cpu(x, y, z):
+    a = np.array([x, y, z])
+    if np.linalg.norm(a) < 1e-3:
+        a = np.array([0.0, 0.0, -1.0])
+    got = np.asarray(frame_from_approach(jnp.asarray(a, jnp.float32)))
+    np.testing.assert_allclose(got, cpu_frame(a), atol=1e-5)
+
+
+def test_point_to_axis_orientation():
+    q_fixed = jnp.array([1.0, 0.0, 0.0, 0.0])
+    axis = jnp.array([0.2, -0.1])
+    p = jnp.array([-0.3, 0.4, 0.1])
+    q = np.asarray(task_orientation(1, q_fixed, axis, p))
+    expected = wxyz(Rotation.from_matrix(cpu_frame([0.5, -0.5, 0.0])))
+    assert angle_np(q, expected) < 1e-5
+    on_axis = np.asarray(task_orientation(1, q_fixed, axis, jnp.array([0.2, -0.1, 0.5])))
+    np.testing.assert_allclose(on_axis, q_fixed)
+    fixed = np.asarray(task_orientation(0, q_fixed, axis, p))
+    np.testing.assert_allclose(fixed, q_fixed)
+
+
+def _two_cylinders():
+    ident = jnp.tile(jnp.array([1.0, 0.0, 0.0, 0.0]), (3, 1))
+    init = Spaces(jnp.zeros(3, jnp.int32), jnp.array([[0.0, -0.1, 0.0], [0.0, 0.1, 0.0],
+                                                      [5.0, 0.0, 0.0]]),
+                  ident, jnp.tile(jnp.array([0.2, 0.2, 0.0]), (3, 1)))
+    opt = init._replace(dims=jnp.tile(jnp.array([0.05, 0.2, 0.0]), (3, 1)))
+    return init, opt
+
+
+def test_meta_weights_inverse_square():
+    _, opt = _two_cylinders()
+    p = jnp.array([-0.15, 0.0, 0.0])
+    w = np.asarray(meta_weights(opt, jnp.array([True, True, False]), p))
+    d = np.array([np.hypot(0.15, 0.1) - 0.05] * 2)
+    expected = (1 / d**2) / np.sum(1 / d**2)
+    np.testing.assert_allclose(w[:2], expected, rtol=1e-5)
+    assert w[2] == 0.0
+    p2 = jnp.array([-0.15, -0.05, 0.0])  # closer to task 0
+    w2 = np.asarray(meta_weights(opt, jnp.array([True, True, False]), p2))
+    d2 = np.array([np.hypot(0.15, 0.05) - 0.05, np.hypot(0.15, 0.15) - 0.05])
+    np.testing.assert_allclose(w2[:2], (1 / d2**2) / np.sum(1 / d2**2), rtol=1e-5)
+
+
+def test_meta_target_region_and_mask():
+    init, opt = _two_cylinders()
+    orient = (jnp.ones(3, jnp.int32), jnp.tile(jnp.array([1.0, 0, 0, 0]), (3, 1)),
+              jnp.array([[0.0, -0.1], [0.0, 0.1], [5.0, 0.0]]))
+    cluster = jnp.array([0, 0, -1])
+    mask = jnp.array([True, True, True])
+    inside, q = meta_target(init, opt, mask, cluster, orient, jnp.array([-0.15, 0.0, 0.0]), 1e-4)
+    assert bool(inside)
+    # Symmetric point: the average of the two point-to-axis frames looks along +x.
+    expected = wxyz(Rotation.from_matrix(cpu_frame([1.0, 0.0, 0.0])))
+    assert angle_np(np.asarray(q), expected) < 1e-4
+    outside, _ = meta_target(init, opt, mask, cluster, orient, jnp.array([-0.5, 0.0, 0.0]), 1e-4)
+    assert not bool(outside)
+    # Masking task 1 removes it from the average: the target is task 0's frame.
+    inside, q = meta_target(init, opt, jnp.array([True, False, True]), cluster, orient,
+                            jnp.array([-0.15, 0.0, 0.0]), 1e-4)
+    expected0 = wxyz(Rotation.from_matrix(cpu_frame([0.15, -0.1, 0.0])))
+    assert bool(inside) and angle_np(np.asarray(q), expected0) < 1e-4
