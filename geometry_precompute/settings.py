@@ -182,6 +182,15 @@ class Settings(Mapping[str, Any]):
     def __getitem__(self, key: str) -> Any:
         return self._values[key]
 
+    def __reduce__(self):  # picklable for worker processes (values are already valid)
+        return (Settings, (dict(self._values),))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Settings) and dict(self._values) == dict(other._values)
+
+    def __hash__(self) -> int:
+        return hash(tuple(sorted((k, str(v)) for k, v in self._values.items())))
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._values)
 

@@ -148,22 +148,29 @@ def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Arr
                    sample(path, k), jnp.minimum(k * path.step, path.length))
 
 
-def track_orientation(init: Spaces, opt: Spaces, mask: Bool[Array, " T"],
-                      cluster: Int[Array, " T"], orient, path: Path, r0: Float[Array, "4"],
-                      activation_step: Array, tau: Array, max_angle: Array, max_steps: Array,
-                      grow: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
-    """R at activation (or at timeout) and the number of steps spent in a meta region,
-    for ``shacc``: SPEC section 9's rotation rule at samples 1 .. activation - 1."""
+def meta_window(init: Spaces, mask: Bool[Array, " T"], cluster: Int[Array, " T"], path: Path,
+                activation_step: Array, max_steps: Array, grow: Array) -> tuple[Array, Array]:
+    """(first, last) sample at which ``shacc`` may rotate: from the first sample inside a
+    cluster member's initial-space interval to the step before activation (or
+    max_steps on timeout). Empty when first > last."""
     member = mask & (cluster >= 0)
     lo, hi = _all_ray(init.kind, init.center, init.quat, init.dims, path.p0, path.u, grow)
     inf = jnp.asarray(jnp.inf, lo.dtype)
     lo = jnp.where(member, lo, inf)
     hi = jnp.where(member, hi, -inf)
-    one = jnp.ones((), lo.dtype)
-    k_enter = jnp.min(first_sample(lo, hi, one, path, max_steps))
+    k_enter = jnp.min(first_sample(lo, hi, jnp.ones((), lo.dtype), path, max_steps))
     k_last = jnp.where(jnp.isfinite(activation_step), activation_step - 1.0,
                        max_steps.astype(lo.dtype))
-    k_enter = jnp.where(jnp.isfinite(k_enter), k_enter, k_last + 1.0)
+    return jnp.where(jnp.isfinite(k_enter), k_enter, k_last + 1.0), k_last
+
+
+def track_orientation(init: Spaces, opt: Spaces, mask: Bool[Array, " T"],
+                      cluster: Int[Array, " T"], orient, path: Path, r0: Float[Array, "4"],
+                      window: tuple[Array, Array], tau: Array,
+                      max_angle: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
+    """R at activation (or at timeout) and the number of steps spent in a meta region,
+    for ``shacc``: SPEC section 9's rotation rule at every sample of ``window``."""
+    k_enter, k_last = window
 
     def body(carry):
         k, r, n = carry

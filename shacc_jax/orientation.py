@@ -30,10 +30,30 @@ def frame_from_approach(a: Float[Array, "3"]) -> Float[Array, "3 3"]:
     return jnp.stack([x, y, z], axis=1)
 
 
+# frame_from_approach((1, 0, 0)) = [[0, 0, 1], [1, 0, 0], [0, 1, 0]] as a quaternion.
+_FORWARD = (0.5, 0.5, 0.5, 0.5)
+
+
+def horizontal_approach_quat(c: Array, s: Array) -> Float[Array, "4"]:
+    """frame_from_approach((c, s, 0)) for a unit (c, s), in closed form: for a
+    horizontal approach the frame is the forward frame turned by the yaw psi =
+    atan2(s, c) about world z, q = (cos psi/2, 0, 0, sin psi/2) * q_forward. The
+    half-angle comes from the normalised half vector (1 + c, s), so no atan2 or
+    matrix conversion is needed (tested against frame_from_approach)."""
+    hc, hs = 1.0 + c, s
+    n = jnp.sqrt(hc * hc + hs * hs)
+    back = n < 1e-6  # psi = pi: the half vector vanishes
+    ch = jnp.where(back, 0.0, hc / jnp.where(back, 1.0, n))
+    sh = jnp.where(back, 1.0, hs / jnp.where(back, 1.0, n))
+    yaw = jnp.stack([ch, jnp.zeros_like(ch), jnp.zeros_like(ch), sh])
+    return quat.multiply(yaw, jnp.asarray(_FORWARD, c.dtype))
+
+
 def task_orientation(kind, q_fixed: Float[Array, "4"], axis: Float[Array, "2"],
                      p: Float[Array, "3"]) -> Float[Array, "4"]:
-    v = jnp.stack([axis[0] - p[0], axis[1] - p[1], jnp.zeros((), p.dtype)])
-    on_axis = jnp.sum(v[:2] ** 2) <= ON_AXIS**2
-    v = jnp.where(on_axis, jnp.array([1.0, 0.0, 0.0], p.dtype), v)
-    q_pta = quat.from_matrix(frame_from_approach(v))
+    dx, dy = axis[0] - p[0], axis[1] - p[1]
+    r2 = dx * dx + dy * dy
+    on_axis = r2 <= ON_AXIS**2
+    inv = 1.0 / jnp.sqrt(jnp.where(on_axis, 1.0, r2))
+    q_pta = horizontal_approach_quat(dx * inv, dy * inv)
     return jnp.where((kind == POINT_TO_AXIS) & ~on_axis, q_pta, q_fixed)

@@ -5,6 +5,7 @@ Every function works on one quaternion (shape (4,)); batching is vmap's job.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -117,15 +118,33 @@ def markley_average(quats: Float[Array, "n 4"], weights: Float[Array, " n"],
     Sign-invariant (q q^T is) and linear in the weights. The eigenvector comes from
     repeated squaring: P <- P^2 / tr(P^2) converges to the projector v v^T at a rate
     (lambda_2 / lambda_1)^(2^k); 24 squarings leave (1 - 1e-6)^(1.7e7) < 1e-7 for any
-    gap float32 can resolve. It is one fused chain of 4x4 products, several times
-    faster on CPU than a batched ``eigh`` (LAPACK one matrix at a time), and is
-    checked against scipy's Rotation.mean in tests/test_quaternion.py.
+    gap float32 can resolve. P is symmetric, so the squarings work on its 10 distinct
+    entries as scalar expressions: 40 multiply-adds each, which XLA vectorises across
+    the batch (measured 1.8 us -> 0.1 us per average on CPU against 4x4 array products,
+    and several times faster than a batched ``eigh``). Checked against scipy's
+    Rotation.mean in tests/test_quaternion.py.
     """
-    m = jnp.sum(weights[:, None, None] * quats[:, :, None] * quats[:, None, :], axis=0)
-    p = m / jnp.maximum(jnp.trace(m), _eps(m))
-    for _ in range(squarings):
-        p = matmul(p, p)
-        p = p / jnp.maximum(jnp.trace(p), _eps(m))
-    col = jnp.argmax(jnp.diagonal(p))
-    q = normalize(p[:, col])
+    wq = weights[:, None] * quats
+    m = jnp.stack([jnp.sum(wq[:, i] * quats[:, j]) for i, j in _UPPER])
+    tiny = jnp.finfo(quats.dtype).tiny
+
+    def square(_, m):
+        # (P^2)_ij = sum_k P_ik P_kj over the 10 stored entries, then trace-normalised.
+        e = [m[k] for k in range(10)]
+        new = [sum(e[_SLOT[i][k]] * e[_SLOT[k][j]] for k in range(4)) for i, j in _UPPER]
+        trace = new[0] + new[4] + new[7] + new[9]
+        return jnp.stack(new) / jnp.maximum(trace, tiny)
+
+    m = m / jnp.maximum(m[0] + m[4] + m[7] + m[9], tiny)
+    # A loop, not an unrolled chain: unrolled, XLA's fused codegen duplicates the
+    # shared subexpressions and compilation does not finish.
+    m = jax.lax.fori_loop(0, squarings, square, m)
+    diag = jnp.stack([m[0], m[4], m[7], m[9]])
+    cols = jnp.stack([jnp.stack([m[_SLOT[i][j]] for i in range(4)]) for j in range(4)])
+    # The column of the largest diagonal entry is the best-conditioned multiple of v.
+    q = normalize(cols[jnp.argmax(diag)])
     return q * jnp.where(q[0] < 0, -1.0, 1.0)
+
+
+_UPPER = [(0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3)]
+_SLOT = [[_UPPER.index((min(i, j), max(i, j))) for j in range(4)] for i in range(4)]

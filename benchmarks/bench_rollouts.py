@@ -1,0 +1,154 @@
+"""Rollout throughput of the jitted evaluation (SPEC section 14).
+
+Two steps, so the accelerator machine needs only JAX and ``shacc_jax``:
+
+    # on any machine with the project installed: precompute and bake random scenes
+    python benchmarks/bench_rollouts.py bake --scenes 10000 --out bake.npz
+    # where the timing happens (CPU or GPU)
+    python benchmarks/bench_rollouts.py run --bake bake.npz --sizes 1000 10000
+
+``run`` reports the compile time apart from the run time (median of --repeat timed
+calls after a warm-up), rollouts per second, and the device. ``reference`` times
+the plain NumPy Automaton of tests/ on a sample of the same rollouts, for the ratio.
+Nothing here asserts a speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt", "quat_opt",
+          "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis", "starts", "dt",
+          "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest")
+
+
+def _precompute_one(seed: int):
+    from geometry_precompute import precompute, random_scene
+
+    kind = "uniform" if seed % 2 == 0 else "gaussian"
+    return precompute(random_scene(seed, kind, 10, 10))
+
+
+def cmd_bake(args) -> None:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from geometry_precompute import bake
+
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:
+        results = list(pool.map(_precompute_one, range(args.scenes), chunksize=64))
+    t1 = time.perf_counter()
+    b = bake(results)
+    arrays = {k: getattr(b, k) for k in FIELDS}
+    arrays = {k: (v.astype(np.float32) if v.dtype == np.float64 else v) for k, v in arrays.items()}
+    np.savez_compressed(args.out, **arrays)
+    print(f"precomputed {args.scenes} scenes in {t1 - t0:.1f} s with {args.workers} workers; "
+          f"wrote {args.out}")
+
+
+def _load(path: str, n: int):
+    import jax.numpy as jnp
+
+    from shacc_jax.types import Scenes
+
+    data = np.load(path)
+    total = data["task_mask"].shape[0]
+    reps = -(-n // total)
+    arrays = {}
+    for k in FIELDS:
+        a = data[k]
+        a = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
+        arrays[k] = jnp.asarray(a)
+    return Scenes(**arrays)
+
+
+def cmd_run(args) -> None:
+    import jax
+
+    import shacc_jax
+    from shacc_jax.evaluation import _evaluate
+
+    modes = tuple(args.modes)
+    rows = []
+    dev = jax.devices()[0]
+    for n in args.sizes:
+        scenes = _load(args.bake, n)
+        S, T = scenes.task_mask.shape
+        N = scenes.starts.shape[1]
+        rollouts = S * T * N * len(modes)
+        t0 = time.perf_counter()
+        from shacc_jax.evaluation import default_block_size
+        compiled = _evaluate.lower(scenes, modes, args.block or default_block_size()).compile()
+        t1 = time.perf_counter()
+        jax.block_until_ready(compiled(scenes))  # warm-up
+        times = []
+        for _ in range(args.repeat):
+            t = time.perf_counter()
+            jax.block_until_ready(compiled(scenes))
+            times.append(time.perf_counter() - t)
+        med = statistics.median(times)
+        row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
+               "starts": N, "modes": len(modes), "rollouts": rollouts,
+               "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
+               "rollouts_per_s": rollouts / med}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    _ = shacc_jax
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def cmd_reference(args) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from reference_automaton import rollout
+
+    from geometry_precompute import bake
+
+    results = [_precompute_one(s) for s in range(args.scenes)]
+    b = bake(results)
+    rng = np.random.default_rng(0)
+    modes = ("baseline", "shrinking", "shacc")
+    picks = [(int(rng.integers(b.n_scenes)), modes[int(rng.integers(3))],
+              int(rng.integers(b.n_starts)), int(rng.integers(10))) for _ in range(args.samples)]
+    t0 = time.perf_counter()
+    for s, m, n, t in picks:
+        rollout(b, s, m, n, t)
+    dt = time.perf_counter() - t0
+    print(json.dumps({"reference_rollouts": len(picks), "seconds": dt,
+                      "rollouts_per_s": len(picks) / dt}))
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    b = sub.add_parser("bake")
+    b.add_argument("--scenes", type=int, default=1000)
+    b.add_argument("--workers", type=int, default=os.cpu_count())
+    b.add_argument("--out", required=True)
+    b.set_defaults(func=cmd_bake)
+    r = sub.add_parser("run")
+    r.add_argument("--bake", required=True)
+    r.add_argument("--sizes", type=int, nargs="+", default=[1000])
+    r.add_argument("--repeat", type=int, default=5)
+    r.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
+    r.add_argument("--block", type=int, default=None)
+    r.add_argument("--json")
+    r.set_defaults(func=cmd_run)
+    f = sub.add_parser("reference")
+    f.add_argument("--scenes", type=int, default=20)
+    f.add_argument("--samples", type=int, default=300)
+    f.set_defaults(func=cmd_reference)
+    args = p.parse_args()
+    args.func(args)
+
+
+if __name__ == "__main__":
+    main()
