@@ -86,7 +86,8 @@ def cmd_run(args) -> None:
         rollouts = S * T * N * len(modes)
         t0 = time.perf_counter()
         from shacc_jax.evaluation import default_block_size
-        compiled = _evaluate.lower(scenes, modes, args.block or default_block_size()).compile()
+        block = args.block or default_block_size()
+        compiled = _evaluate.lower(scenes, modes, block, args.chunk).compile()
         t1 = time.perf_counter()
         jax.block_until_ready(compiled(scenes))  # warm-up
         times = []
@@ -96,7 +97,8 @@ def cmd_run(args) -> None:
             times.append(time.perf_counter() - t)
         med = statistics.median(times)
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
-               "starts": N, "modes": len(modes), "rollouts": rollouts,
+               "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
+               "chunk": args.chunk,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
@@ -140,6 +142,7 @@ def main() -> None:
     r.add_argument("--repeat", type=int, default=5)
     r.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
     r.add_argument("--block", type=int, default=None)
+    r.add_argument("--chunk", type=int, default=16)
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     f = sub.add_parser("reference")

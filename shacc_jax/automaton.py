@@ -16,9 +16,11 @@ Outcomes never need the loop of 3 mm steps:
    activation found is exactly the step rule's.
 2. Orientation (``shacc`` only). R changes only at samples inside a meta
    region, which all lie after the first sample inside a superset of a
-   cluster member's initial space. The rate-limited geodesic tracking runs
-   sample by sample from there to the step before activation, exactly as the
-   step rule does, with the meta region tested by the exact SDFs.
+   cluster member's initial space (:func:`meta_window`). The meta region test
+   and its target R_M(p_k) depend on the sample only, not on R, so they are
+   computed for many samples at once (``meta.meta_target``); the rate-limited
+   geodesic tracking then runs over them in order (:func:`rotate_along`),
+   exactly as the step rule does.
 
 The NumPy reference in ``tests/reference_automaton.py`` runs the step rule
 literally; ``tests/test_automaton.py`` checks both agree rollout by rollout.
@@ -34,7 +36,6 @@ from jaxtyping import Array, Bool, Float, Int
 
 from . import quaternion as quat
 from . import shapes
-from .meta import meta_target
 from .orientation import task_orientation
 from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG, Spaces
 
@@ -164,24 +165,19 @@ def meta_window(init: Spaces, mask: Bool[Array, " T"], cluster: Int[Array, " T"]
     return jnp.where(jnp.isfinite(k_enter), k_enter, k_last + 1.0), k_last
 
 
-def track_orientation(init: Spaces, opt: Spaces, mask: Bool[Array, " T"],
-                      cluster: Int[Array, " T"], orient, path: Path, r0: Float[Array, "4"],
-                      window: tuple[Array, Array], tau: Array,
-                      max_angle: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
-    """R at activation (or at timeout) and the number of steps spent in a meta region,
-    for ``shacc``: SPEC section 9's rotation rule at every sample of ``window``."""
-    k_enter, k_last = window
+def rotate_along(r0: Float[Array, "4"], inside: Bool[Array, " W"], targets: Float[Array, "W 4"],
+                 max_angle: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
+    """SPEC section 9's rotation rule over W consecutive samples: R turns towards each
+    sample's R_M by at most ``max_angle`` where the sample is in a meta region. The
+    targets do not depend on R, so they are computed for all samples beforehand (in
+    parallel); only this scan is sequential."""
 
-    def body(carry):
-        k, r, n = carry
-        p = sample(path, k)
-        inside, target = meta_target(init, opt, mask, cluster, orient, p, tau)
-        r = jnp.where(inside, quat.rotate_towards(r, target, max_angle), r)
-        return k + 1.0, r, n + inside.astype(jnp.int32)
+    def step(r, x):
+        ok, target = x
+        return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), None
 
-    _, r, n = jax.lax.while_loop(lambda c: c[0] <= k_last, body,
-                                 (k_enter, r0, jnp.zeros((), jnp.int32)))
-    return r, n
+    r, _ = jax.lax.scan(step, r0, (inside, targets))
+    return r, jnp.sum(inside.astype(jnp.int32))
 
 
 def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> Array:

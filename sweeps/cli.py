@@ -16,6 +16,7 @@ from geometry_precompute.settings import parse_cli_value
 
 from .evaluate_cmd import add_evaluate
 from .output import precompute_json, write_json
+from .reproduce import add_reproduce
 
 
 def _parse_sets(pairs: Sequence[str]) -> dict:
@@ -81,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
     pre.set_defaults(func=cmd_precompute)
     add_evaluate(sub)
+    add_reproduce(sub)
     return p
 
 

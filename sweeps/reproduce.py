@@ -1,0 +1,385 @@
+"""``shacc reproduce``: the paper's simulation experiment (sections VI-VII) in one
+command: the shipped manual set and a random set, in all three modes, with
+Fig. 6 as numbers, tables and plots, and Fig. 7's success fields.
+
+Categories (SPEC section 10 and the issue): ``uncluttered`` (manual, C_init = 0),
+``cluttered`` (manual, C_init > 0), ``uniform``, ``gaussian`` (random sets),
+``all``, and ``cinit_pos`` (every scene with C_init > 0). Per category and mode
+the means of u_scene, delta_R (the scene means over successes; scenes without a
+success are left out) and C_final (C_init for baseline, which does not shrink),
+each with a 95 % percentile-bootstrap CI over scenes.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import platform
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+import shacc_jax
+from geometry_precompute import (
+    DEFAULTS,
+    load_scene,
+    precompute,
+    random_scene,
+    shipped_scene_paths,
+)
+
+from . import plots
+from .output import write_atomic, write_json
+from .pipeline import evaluate_results
+from .stats import mean_ci, pearson_ci
+
+MODES = shacc_jax.MODES
+CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos")
+PAPER = {
+    "rho_C": (-0.53, [-0.72, -0.27]),
+    "C_change_cinit_pos": -0.84,
+    "success_cinit_pos": (0.52, 0.75),
+    "delta_R_cinit_pos": (1.66, 0.52),
+}
+README_BEGIN = "<!-- reproduce:begin (written by shacc reproduce --readme) -->"
+README_END = "<!-- reproduce:end -->"
+
+
+def _precompute_task(item):
+    kind, ref, overrides = item
+    scene = load_scene(ref) if kind == "manual" else random_scene(ref[0], ref[1], 5, 10)
+    return precompute(scene, scene.settings(DEFAULTS, overrides))
+
+
+def _software() -> dict:
+    out = {"python": platform.python_version()}
+    for name in ("jax", "jaxlib", "numpy", "scipy", "trimesh", "manifold3d", "coal", "shacc"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _ratio(a, b):
+    return None if a in (None, 0) or b is None else (b - a) / a
+
+
+def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
+        field_grid: int = 64, overrides: dict | None = None, workers: int | None = None,
+        readme: Path | None = None) -> dict:
+    t_start = time.perf_counter()
+    settings = DEFAULTS.with_overrides(overrides or {}, "<--set>")
+    if quick:
+        settings = settings.with_overrides({"bootstrap_resamples": 200})
+    n_boot = settings["bootstrap_resamples"]
+    out.mkdir(parents=True, exist_ok=True)
+
+    manual = shipped_scene_paths()
+    randoms = [(seed + i, "uniform" if i % 2 == 0 else "gaussian") for i in range(n_random)]
+    items = [("manual", p, dict(overrides or {})) for p in manual]
+    items += [("random", r, dict(overrides or {})) for r in randoms]
+    print(f"reproduce: {len(manual)} manual + {n_random} random scenes, modes "
+          f"{', '.join(MODES)}", flush=True)
+    with ProcessPoolExecutor(workers) as pool:
+        results = list(tqdm(pool.map(_precompute_task, items), total=len(items),
+                            desc="precompute", unit="scene", file=sys.stdout))
+    t_pre = time.perf_counter()
+    print("evaluating all rollouts (compiles on first use)...", flush=True)
+    ev = evaluate_results(results, MODES, max_tasks=max(len(r.spaces) for r in results))
+    me = ev.evaluation.metrics
+    n_rollouts = int(me.n_rollouts.sum())
+    t_eval = time.perf_counter()
+    print(f"  {n_rollouts} rollouts in {ev.seconds['evaluate']:.1f} s", flush=True)
+
+    scenes = []
+    for i, r in enumerate(results):
+        is_manual = i < len(manual)
+        cat = ("uncluttered" if r.C_init == 0 else "cluttered") if is_manual else randoms[
+            i - len(manual)][1]
+        entry = {"name": r.scene.name, "set": "manual" if is_manual else "random",
+                 "category": cat, "n_tasks": len(r.spaces), "C_init": r.C_init,
+                 "C_final": r.C_final, "d": r.d, "h": r.h}
+        for m, mode in enumerate(MODES):
+            dr = me.delta_R_mean[i, m]
+            entry[mode] = {"u_scene": float(me.u_scene[i, m]),
+                           "delta_R_mean": None if not np.isfinite(dr) else float(dr)}
+        scenes.append(entry)
+
+    print("bootstrap confidence intervals...", flush=True)
+    u_base = np.array([s["baseline"]["u_scene"] for s in scenes])
+    measures = {k: np.array([s[k] for s in scenes]) for k in ("C_init", "d", "h")}
+    correlation = {("C" if k == "C_init" else k): pearson_ci(v, u_base, n_boot, seed)
+                   for k, v in measures.items()}
+    members = {
+        "uncluttered": [s["category"] == "uncluttered" for s in scenes],
+        "cluttered": [s["category"] == "cluttered" for s in scenes],
+        "uniform": [s["category"] == "uniform" for s in scenes],
+        "gaussian": [s["category"] == "gaussian" for s in scenes],
+        "all": [True for _ in scenes],
+        "cinit_pos": [s["C_init"] > 0 for s in scenes],
+    }
+    categories = {}
+    for c in CATEGORIES:
+        idx = [i for i, keep in enumerate(members[c]) if keep]
+        entry = {"n_scenes": len(idx)}
+        for mode in MODES:
+            sel = [scenes[i] for i in idx]
+            c_final = [s["C_init"] if mode == "baseline" else s["C_final"] for s in sel]
+            dr = [np.nan if s[mode]["delta_R_mean"] is None else s[mode]["delta_R_mean"]
+                  for s in sel]
+            entry[mode] = {"u_scene": mean_ci([s[mode]["u_scene"] for s in sel], n_boot, seed),
+                           "delta_R": mean_ci(dr, n_boot, seed),
+                           "C_final": mean_ci(c_final, n_boot, seed)}
+        categories[c] = entry
+    t_stats = time.perf_counter()
+
+    print(f"success fields on a {field_grid} x {field_grid} start grid...", flush=True)
+    field_idx = next(i for i, s in enumerate(scenes) if s["name"] == "mug-behind-two")
+    fr = results[field_idx]
+    field_settings = fr.settings.with_overrides({"start_grid": [field_grid, field_grid]})
+    field = evaluate_results([precompute(fr.scene, field_settings)], ("baseline", "shacc"))
+    t_field = time.perf_counter()
+
+    summary = {
+        "correlation": correlation,
+        "categories": categories,
+        "scenes": scenes,
+        "settings": {**settings.to_dict(), "random_scenes": n_random, "seed": seed,
+                     "quick": quick, "field_grid": field_grid, "field_scene": fr.scene.name,
+                     "software": _software(), "device": str(shacc_jax_device())},
+        "comparison": _comparison(correlation, categories),
+        "timing_s": {"precompute": t_pre - t_start, "evaluate": t_eval - t_pre,
+                     "statistics": t_stats - t_eval, "success_fields": t_field - t_stats},
+        "rollouts": n_rollouts,
+    }
+    print("figures and report...", flush=True)
+    _figures(out, summary, scenes, measures, u_base, field, field_grid, fr)
+    report = render_report(summary)
+    write_atomic(out / "report.md", report.encode())
+    summary["timing_s"]["total"] = time.perf_counter() - t_start
+    write_json(out / "summary.json", summary)
+    if readme is not None:
+        update_readme(readme, out, summary)
+    print(f"wrote {out}/summary.json, report.md and figures in "
+          f"{summary['timing_s']['total']:.1f} s", flush=True)
+    return summary
+
+
+def shacc_jax_device():
+    import jax
+
+    return jax.devices()[0]
+
+
+def _comparison(corr: dict, cats: dict) -> dict:
+    pos = cats["cinit_pos"]
+    c0 = pos["baseline"]["C_final"]["mean"]
+    c1 = pos["shrinking"]["C_final"]["mean"]
+    u0 = pos["baseline"]["u_scene"]["mean"]
+    u1 = pos["shrinking"]["u_scene"]["mean"]
+    d0 = pos["baseline"]["delta_R"]["mean"]
+    d1 = pos["shacc"]["delta_R"]["mean"]
+    return {"rho_C": corr["C"], "C_change_cinit_pos": _ratio(c0, c1),
+            "C_cinit_pos": [c0, c1], "success_cinit_pos": [u0, u1],
+            "success_change_cinit_pos": _ratio(u0, u1), "delta_R_cinit_pos": [d0, d1],
+            "delta_R_change_cinit_pos": _ratio(d0, d1)}
+
+
+def _figures(out, summary, scenes, measures, u_base, field, grid, fr) -> None:
+    named = {"d": measures["d"], "h": measures["h"], "C": measures["C_init"]}
+    plots.correlation_panels(u_base, named, summary["correlation"], out / "fig6a_correlation.png")
+    cats = summary["categories"]
+    plots.category_bars(cats, "C_final", MODES, out / "fig6b_c_final.png", "C_final")
+    plots.category_bars(cats, "u_scene", MODES, out / "fig6c_success.png", "u_scene")
+    plots.category_bars(cats, "delta_R", MODES, out / "fig6d_delta_r.png", "delta_R (rad)")
+    s = fr.settings
+    y_c = float(np.mean([o.position[1] for o in fr.scene.objects]))
+    w = s["start_y_halfwidth"]
+    plots.success_fields(field.evaluation.rollouts.outcome[0, :, :, : len(fr.spaces)],
+                         (grid, grid), (y_c - w, y_c + w), s["start_z_range"], fr.task_ids,
+                         field.modes, out / "fig7_success_fields.png",
+                         f"{fr.scene.name}: success fields ({grid} x {grid} starts)")
+    plots.scene_top_view(fr, path=out / "scene_field.png")
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
+def _fmt(entry, digits=2) -> str:
+    if entry is None or entry.get("mean") is None:
+        return "n/a"
+    m = entry["mean"]
+    ci = entry.get("ci")
+    if ci is None:
+        return f"{m:.{digits}f}"
+    return f"{m:.{digits}f} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
+
+
+def _fmt_rho(c) -> str:
+    if c.get("rho") is None:
+        return "n/a"
+    ci = c["ci"]
+    return f"{c['rho']:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:+.0f} %"
+
+
+def tables_markdown(summary: dict) -> str:
+    corr, cats = summary["correlation"], summary["categories"]
+    lines = ["**(a) Pearson's rho between baseline u_scene and each measure** "
+             "(95 % bootstrap CI)", "", "| measure | rho [95 % CI] |", "| --- | --- |"]
+    for k in ("d", "h", "C"):
+        lines.append(f"| {k} | {_fmt_rho(corr[k])} |")
+    for metric, title, digits in (("C_final", "(b) C_final", 3),
+                                  ("u_scene", "(c) success rate u_scene", 2),
+                                  ("delta_R", "(d) delta_R at skill start (rad)", 2)):
+        lines += ["", f"**{title}**, mean [95 % CI] per category", "",
+                  "| category | n | " + " | ".join(MODES) + " |",
+                  "| --- | --- | " + " | ".join("---" for _ in MODES) + " |"]
+        for c in CATEGORIES:
+            e = cats[c]
+            cells = " | ".join(_fmt(e[m][metric], digits) for m in MODES)
+            lines.append(f"| {c} | {e['n_scenes']} | {cells} |")
+    return "\n".join(lines)
+
+
+def comparison_markdown(summary: dict) -> str:
+    cmp = summary["comparison"]
+    rho = cmp["rho_C"]
+    c0, c1 = cmp["C_cinit_pos"]
+    u0, u1 = cmp["success_cinit_pos"]
+    d0, d1 = cmp["delta_R_cinit_pos"]
+
+    def num(x, d=2):
+        return "n/a" if x is None else f"{x:.{d}f}"
+
+    return "\n".join([
+        "| quantity | paper | ours |", "| --- | --- | --- |",
+        f"| rho(C, u_scene baseline) | -0.53 [-0.72, -0.27] | {_fmt_rho(rho)} |",
+        f"| C, scenes with C_init > 0 (baseline -> Shrinking) | 23 % -> 4 % (-84 %) | "
+        f"{num(100 * c0 if c0 is not None else None, 0)} % -> "
+        f"{num(100 * c1 if c1 is not None else None, 0)} % "
+        f"({_pct(cmp['C_change_cinit_pos'])}) |",
+        f"| success, C_init > 0 (baseline -> Shrinking) | 52 % -> 75 % (+45 %) | "
+        f"{num(100 * u0 if u0 is not None else None, 0)} % -> "
+        f"{num(100 * u1 if u1 is not None else None, 0)} % "
+        f"({_pct(cmp['success_change_cinit_pos'])}) |",
+        f"| delta_R, C_init > 0 (baseline -> ShaCC) | 1.66 -> 0.52 rad (-69 %) | "
+        f"{num(d0)} -> {num(d1)} rad ({_pct(cmp['delta_R_change_cinit_pos'])}) |",
+    ])
+
+
+def discussion(summary: dict) -> str:
+    corr, cats, cmp = summary["correlation"], summary["categories"], summary["comparison"]
+    rho_c = corr["C"]["rho"]
+    others = [abs(corr[k]["rho"]) for k in ("d", "h") if corr[k]["rho"] is not None]
+    stronger = rho_c is not None and rho_c < 0 and all(abs(rho_c) > o for o in others)
+    u_unc = cats["uncluttered"]
+    unc_drop = (u_unc["shrinking"]["u_scene"]["mean"] or 0) < (
+        u_unc["baseline"]["u_scene"]["mean"] or 0) - 1e-9
+    same = all(cats[c]["shrinking"]["u_scene"]["mean"] == cats[c]["shacc"]["u_scene"]["mean"]
+               for c in CATEGORIES)
+    parts = [
+        f"C correlates {'negatively' if rho_c is not None and rho_c < 0 else 'not negatively'}"
+        f" with baseline success (rho = {rho_c:.2f})" if rho_c is not None else
+        "rho for C is undefined",
+        "and more strongly than d and h" if stronger else "but not more strongly than d or h",
+    ]
+    text = [
+        " ".join(parts) + ". Shrinking changes C on scenes with C_init > 0 by "
+        f"{_pct(cmp['C_change_cinit_pos'])} and their success rate by "
+        f"{_pct(cmp['success_change_cinit_pos'])}; on uncluttered manual scenes it "
+        f"{'lowers' if unc_drop else 'does not lower'} success. ShaCC's success "
+        f"{'equals' if same else 'differs from'} Shrinking's in every category, and Merging "
+        f"changes delta_R on C_init > 0 scenes by {_pct(cmp['delta_R_change_cinit_pos'])} "
+        "against the baseline.",
+        "",
+        "Where and why the numbers differ from the paper's: the scenes are not the paper's "
+        "(its twelve manual scenes and twenty random ones are shown only as pictures; ours "
+        "follow the same patterns with our own coordinates, and the random set comes from "
+        "our seeded generator, half mugs with side grasps and half cups with handle grasps). "
+        "The Automaton here is SPEC section 9's exact greedy step rule, with starts on a "
+        "6 x 6 grid 0.45 m in front of the scene and uniformly random start orientations; "
+        "the paper's Automaton also plans orientation, and its start orientations are "
+        "'arbitrary'. With uniformly random start orientations the baseline's delta_R "
+        "averages about 2.1 rad (the mean angle to a random rotation is pi/2 + 2/pi, "
+        "2.13 rad), above the paper's 1.66 rad, so relative changes in delta_R are not "
+        "comparable one to one. With twelve plus twenty scenes the confidence intervals "
+        "are wide; the correlation's CI in particular moves with the random seed "
+        "(`--seed`).",
+    ]
+    return "\n".join(text)
+
+
+def render_report(summary: dict) -> str:
+    s = summary["settings"]
+    t = summary["timing_s"]
+    return "\n".join([
+        "# Reproduction of the paper's simulation experiment", "",
+        f"Generated by `shacc reproduce` ({summary['rollouts']} rollouts, "
+        f"{summary['categories']['all']['n_scenes']} scenes, seed {s['seed']}, "
+        f"{s['bootstrap_resamples']} bootstrap resamples, device {s['device']}).", "",
+        "## Fig. 6 as tables", "", tables_markdown(summary), "",
+        "## Against the paper", "", comparison_markdown(summary), "",
+        discussion(summary), "",
+        "## Figures", "",
+        "![Fig. 6a](fig6a_correlation.png)", "",
+        "![Fig. 6b](fig6b_c_final.png) ![Fig. 6c](fig6c_success.png) "
+        "![Fig. 6d](fig6d_delta_r.png)", "",
+        f"![Fig. 7](fig7_success_fields.png)", "",
+        f"Time: precompute {t['precompute']:.1f} s, evaluation {t['evaluate']:.1f} s, "
+        f"statistics {t['statistics']:.1f} s, success fields {t['success_fields']:.1f} s.", "",
+    ])
+
+
+def update_readme(readme: Path, out: Path, summary: dict) -> None:
+    text = readme.read_text()
+    if README_BEGIN not in text or README_END not in text:
+        raise ValueError(f"{readme}: no {README_BEGIN!r} ... {README_END!r} markers")
+    rel = out.resolve().relative_to(readme.resolve().parent)
+    body = "\n".join([
+        README_BEGIN, "",
+        f"From `shacc reproduce --out {rel} --readme {readme.name}` "
+        f"({summary['rollouts']} rollouts on {summary['settings']['device']}, "
+        f"{summary['timing_s']['total']:.0f} s):", "",
+        tables_markdown(summary), "", comparison_markdown(summary), "",
+        discussion(summary), "",
+        f"![Fig. 6a]({rel}/fig6a_correlation.png)", "",
+        f"![Fig. 6c]({rel}/fig6c_success.png) ![Fig. 6d]({rel}/fig6d_delta_r.png)", "",
+        f"![Fig. 7]({rel}/fig7_success_fields.png)", "", README_END])
+    head, rest = text.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    write_atomic(readme, (head + body + tail).encode())
+
+
+def cmd_reproduce(args) -> int:
+    from .cli import _parse_sets
+
+    n_random = args.random_scenes if args.random_scenes is not None else (4 if args.quick
+                                                                           else 20)
+    grid = args.field_grid if args.field_grid is not None else (16 if args.quick else 64)
+    run(Path(args.out), n_random, args.seed, args.quick, grid, _parse_sets(args.set),
+        args.workers, Path(args.readme) if args.readme else None)
+    return 0
+
+
+def add_reproduce(sub) -> None:
+    p = sub.add_parser("reproduce", help="the paper's experiment: Fig. 6 and Fig. 7")
+    p.add_argument("--out", default="reproduce_out", help="output folder")
+    p.add_argument("--random-scenes", type=int, default=None,
+                   help="random scenes (default 20; 4 with --quick)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the random scenes and bootstrap")
+    p.add_argument("--quick", action="store_true",
+                   help="few random scenes, a coarse start grid, 200 bootstrap resamples")
+    p.add_argument("--field-grid", type=int, default=None,
+                   help="start grid per side for Fig. 7 (default 64; 16 with --quick)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument("--workers", type=int, default=None, help="precompute processes")
+    p.add_argument("--readme", help="also rewrite the marked section of this README")
+    p.set_defaults(func=cmd_reproduce)
