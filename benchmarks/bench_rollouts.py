@@ -77,6 +77,10 @@ def cmd_run(args) -> None:
     from shacc_jax.evaluation import _evaluate
 
     modes = tuple(args.modes)
+    if args.markley_unroll is not None:
+        from shacc_jax import quaternion
+
+        quaternion.MARKLEY_UNROLL = args.markley_unroll
     rows = []
     dev = jax.devices()[0]
     for n in args.sizes:
@@ -98,7 +102,7 @@ def cmd_run(args) -> None:
         med = statistics.median(times)
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
-               "chunk": args.chunk,
+               "chunk": args.chunk, "markley_unroll": args.markley_unroll,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
@@ -143,6 +147,7 @@ def main() -> None:
     r.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
     r.add_argument("--block", type=int, default=None)
     r.add_argument("--chunk", type=int, default=16)
+    r.add_argument("--markley-unroll", type=int, default=None)
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     f = sub.add_parser("reference")

@@ -136,14 +136,24 @@ def markley_average(quats: Float[Array, "n 4"], weights: Float[Array, " n"],
         return jnp.stack(new) / jnp.maximum(trace, tiny)
 
     m = m / jnp.maximum(m[0] + m[4] + m[7] + m[9], tiny)
-    # A loop, not an unrolled chain: unrolled, XLA's fused codegen duplicates the
-    # shared subexpressions and compilation does not finish.
-    m = jax.lax.fori_loop(0, squarings, square, m)
+    m = jax.lax.fori_loop(0, squarings, square, m, unroll=_unroll(squarings))
     diag = jnp.stack([m[0], m[4], m[7], m[9]])
     cols = jnp.stack([jnp.stack([m[_SLOT[i][j]] for i in range(4)]) for j in range(4)])
     # The column of the largest diagonal entry is the best-conditioned multiple of v.
     q = normalize(cols[jnp.argmax(diag)])
     return q * jnp.where(q[0] < 0, -1.0, 1.0)
+
+
+# Unrolling the squarings lets XLA fuse them with the rest of the meta-target pass on
+# a GPU (one kernel instead of one per squaring); on CPU the rolled loop is ~20 %
+# faster (benchmarks/RESULTS.md). None picks by backend; set an int to override.
+MARKLEY_UNROLL: int | None = None
+
+
+def _unroll(squarings: int) -> int:
+    if MARKLEY_UNROLL is not None:
+        return max(1, min(MARKLEY_UNROLL, squarings))
+    return squarings if jax.default_backend() in ("gpu", "tpu") else 1
 
 
 _UPPER = [(0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3)]

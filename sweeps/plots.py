@@ -9,10 +9,10 @@ from collections.abc import Sequence
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from scipy.spatial import ConvexHull  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import ListedColormap
+from scipy.spatial import ConvexHull
 
 MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c"}
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
@@ -106,7 +106,7 @@ def success_fields(outcome: np.ndarray, grid: tuple[int, int], y_range, z_range,
 
 def _outline_xy(shape) -> np.ndarray:
     """The shape's footprint on the table (x, y) as a closed polyline."""
-    a, b, c = shape.dims
+    a, b, _ = shape.dims
     rot = shape.rotation
     center = np.asarray(shape.center)
     if shape.kind in ("cylinder", "disk"):

@@ -332,7 +332,7 @@ def render_report(summary: dict) -> str:
         "![Fig. 6a](fig6a_correlation.png)", "",
         "![Fig. 6b](fig6b_c_final.png) ![Fig. 6c](fig6c_success.png) "
         "![Fig. 6d](fig6d_delta_r.png)", "",
-        f"![Fig. 7](fig7_success_fields.png)", "",
+        "![Fig. 7](fig7_success_fields.png)", "",
         f"Time: precompute {t['precompute']:.1f} s, evaluation {t['evaluate']:.1f} s, "
         f"statistics {t['statistics']:.1f} s, success fields {t['success_fields']:.1f} s.", "",
     ])
