@@ -1,0 +1,70 @@
+"""``shacc reproduce --quick``: every output exists and holds what the issue names."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from sweeps.cli import main
+from sweeps.reproduce import CATEGORIES, README_BEGIN, README_END
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    readme = out / "README.md"
+    readme.write_text(f"# x\n\n{README_BEGIN}\nold\n{README_END}\n\ntail\n")
+    assert main(["reproduce", "--quick", "--random-scenes", "2", "--field-grid", "6",
+                 "--workers", "1", "--out", str(out), "--readme", str(readme)]) == 0
+    return out, readme
+
+
+def test_summary_keys(quick_run):
+    out, _ = quick_run
+    s = json.loads((out / "summary.json").read_text())
+    for k in ("C", "d", "h"):
+        assert set(s["correlation"][k]) >= {"rho", "ci"}
+    assert s["correlation"]["C"]["rho"] < 0
+    assert list(s["categories"]) == list(CATEGORIES)
+    for c in CATEGORIES:
+        cat = s["categories"][c]
+        assert "n_scenes" in cat
+        for mode in ("baseline", "shrinking", "shacc"):
+            assert set(cat[mode]) == {"u_scene", "delta_R", "C_final"}
+            assert set(cat[mode]["u_scene"]) >= {"mean", "ci"}
+    assert s["categories"]["all"]["n_scenes"] == len(s["scenes"]) == 14
+    scene = s["scenes"][0]
+    assert set(scene) >= {"name", "set", "category", "C_init", "C_final", "d", "h",
+                          "baseline", "shrinking", "shacc"}
+    assert set(scene["shacc"]) == {"u_scene", "delta_R_mean"}
+    assert s["settings"]["software"]["jax"] and s["settings"]["bootstrap_resamples"] == 200
+
+
+def test_what_the_numbers_must_show(quick_run):
+    out, _ = quick_run
+    s = json.loads((out / "summary.json").read_text())
+    cats = s["categories"]
+    pos = cats["cinit_pos"]
+    assert pos["shrinking"]["C_final"]["mean"] < pos["baseline"]["C_final"]["mean"]
+    assert pos["shrinking"]["u_scene"]["mean"] > pos["baseline"]["u_scene"]["mean"]
+    unc = cats["uncluttered"]
+    assert unc["shrinking"]["u_scene"]["mean"] >= unc["baseline"]["u_scene"]["mean"]
+    for c in CATEGORIES:
+        assert cats[c]["shacc"]["u_scene"]["mean"] == cats[c]["shrinking"]["u_scene"]["mean"]
+    assert cats["cluttered"]["shacc"]["delta_R"]["mean"] < \
+        cats["cluttered"]["baseline"]["delta_R"]["mean"]
+
+
+def test_report_figures_and_readme(quick_run):
+    out, readme = quick_run
+    report = (out / "report.md").read_text()
+    assert "| rho(C, u_scene baseline) | -0.53 [-0.72, -0.27] |" in report
+    assert "**(c) success rate u_scene**" in report
+    for name in ("fig6a_correlation", "fig6b_c_final", "fig6c_success", "fig6d_delta_r",
+                 "fig7_success_fields"):
+        png = out / f"{name}.png"
+        assert png.stat().st_size > 5000
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = readme.read_text()
+    assert "old" not in text and text.endswith("tail\n") and "Pearson" in text
