@@ -1,0 +1,54 @@
+"""Precompute time of a 10-task random scene (SPEC section 14): spaces, C_init,
+clusters, Shrinking, C_final and d, h, then the bake, on one core.
+
+    python benchmarks/bench_precompute.py [--scenes 20] [--sections 32]
+
+Prints the median and quartiles over the scenes, per stage. Pins itself to one CPU
+where the platform allows. Nothing here asserts a speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--scenes", type=int, default=20)
+    p.add_argument("--tasks", type=int, default=10)
+    p.add_argument("--sections", type=int, default=None)
+    args = p.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    from geometry_precompute import DEFAULTS, bake, precompute, random_scene
+
+    settings = DEFAULTS if args.sections is None else DEFAULTS.with_overrides(
+        {"mesh_sections": args.sections})
+    scenes = [random_scene(1000 + i, "uniform" if i % 2 == 0 else "gaussian", args.tasks,
+                           args.tasks) for i in range(args.scenes)]
+    precompute(scenes[0], settings)  # warm-up (imports, first allocations)
+    totals, stages = [], {}
+    for sc in scenes:
+        t0 = time.perf_counter()
+        r = precompute(sc, settings)
+        bake([r])
+        totals.append(time.perf_counter() - t0)
+        for k, v in r.seconds.items():
+            stages.setdefault(k, []).append(v)
+    q = statistics.quantiles(totals, n=4)
+    print(json.dumps({
+        "scenes": args.scenes, "tasks": args.tasks, "mesh_sections": settings["mesh_sections"],
+        "cores": 1, "median_ms": 1e3 * statistics.median(totals),
+        "quartiles_ms": [1e3 * q[0], 1e3 * q[2]], "max_ms": 1e3 * max(totals),
+        "stage_median_ms": {k: round(1e3 * statistics.median(v), 2) for k, v in stages.items()},
+    }, indent=1))
+
+
+if __name__ == "__main__":
+    main()
