@@ -37,11 +37,9 @@ from jaxtyping import Array, Bool, Float, Int
 from . import quaternion as quat
 from . import shapes
 from .orientation import task_orientation
-from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG, Spaces
+from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG
 
-_all_sdf = jax.vmap(shapes.sdf, in_axes=(0, 0, 0, 0, None))
 TIE = 1e-6
-_all_ray = jax.vmap(shapes.ray_interval, in_axes=(0, 0, 0, 0, None, None, None))
 
 
 def rounding_slack(dtype) -> float:
@@ -59,10 +57,9 @@ class Path(NamedTuple):
     step: Float[Array, ""]  # s = v_max dt
 
 
-def straight_path(spaces: Spaces, target: Int[Array, ""], p0: Float[Array, "3"],
+def straight_path(spaces: shapes.Prepared, target: Int[Array, ""], p0: Float[Array, "3"],
                   step: Float[Array, ""], max_steps: Array) -> Path:
-    c0 = shapes.project(spaces.kind[target], spaces.center[target], spaces.quat[target],
-                        spaces.dims[target], p0)
+    c0 = shapes.prepared_project(jax.tree.map(lambda a: a[target], spaces), p0)
     diff = c0 - p0
     length = shapes._safe_norm(diff)
     u = jnp.where(length > 0, diff / jnp.where(length > 0, length, 1.0), 0.0)
@@ -92,9 +89,9 @@ class Activation(NamedTuple):
     sdf: Float[Array, " T"]
 
 
-def first_activation(spaces: Spaces, mask: Bool[Array, " T"], path: Path, tau: Array,
+def first_activation(spaces: shapes.Prepared, mask: Bool[Array, " T"], path: Path, tau: Array,
                      max_steps: Array, grow: Array) -> Activation:
-    lo, hi = _all_ray(spaces.kind, spaces.center, spaces.quat, spaces.dims, path.p0, path.u, grow)
+    lo, hi = shapes.all_ray_intervals(spaces, path.p0, path.u, grow)
     inf = jnp.asarray(jnp.inf, lo.dtype)
     lo = jnp.where(mask, lo, inf)
     hi = jnp.where(mask, hi, -inf)
@@ -108,8 +105,7 @@ def first_activation(spaces: Spaces, mask: Bool[Array, " T"], path: Path, tau: A
         k = jnp.minimum(jnp.min(first_sample(lo, hi, kmin, path, max_steps)), landing)
         none = ~jnp.isfinite(k)
         p = sample(path, jnp.where(none, 0.0, k))
-        sd = jnp.where(mask, _all_sdf(spaces.kind, spaces.center, spaces.quat, spaces.dims, p),
-                       inf)
+        sd = jnp.where(mask, shapes.all_sdf(spaces, p), inf)
         active = (sd <= tau) & ~none
         hit = jnp.any(active)
         return k + 1.0, hit | none, jnp.where(hit, k, inf), active, sd
@@ -149,13 +145,14 @@ def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Arr
                    sample(path, k), jnp.minimum(k * path.step, path.length))
 
 
-def meta_window(init: Spaces, mask: Bool[Array, " T"], cluster: Int[Array, " T"], path: Path,
-                activation_step: Array, max_steps: Array, grow: Array) -> tuple[Array, Array]:
+def meta_window(init: shapes.Prepared, mask: Bool[Array, " T"], cluster: Int[Array, " T"],
+                path: Path, activation_step: Array, max_steps: Array,
+                grow: Array) -> tuple[Array, Array]:
     """(first, last) sample at which ``shacc`` may rotate: from the first sample inside a
     cluster member's initial-space interval to the step before activation (or
     max_steps on timeout). Empty when first > last."""
     member = mask & (cluster >= 0)
-    lo, hi = _all_ray(init.kind, init.center, init.quat, init.dims, path.p0, path.u, grow)
+    lo, hi = shapes.all_ray_intervals(init, path.p0, path.u, grow)
     inf = jnp.asarray(jnp.inf, lo.dtype)
     lo = jnp.where(member, lo, inf)
     hi = jnp.where(member, hi, -inf)

@@ -81,11 +81,16 @@ def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, ch
     n_idx = jnp.broadcast_to(jnp.arange(N)[None, :, None], (S, N, T)).reshape(L)
     flat_path = jax.tree.map(lambda a: a.reshape(L, *a.shape[3:]), path)
 
+    # Prepared once per scene, gathered per lane.
+    prep_init = jax.vmap(lambda sc: sc.spaces("init"))(scenes)
+    prep_opt = jax.vmap(lambda sc: sc.spaces("opt"))(scenes)
+
     def window(s, p, k_act):
         sc = jax.tree.map(lambda a: a[s], scenes)
         x = _numbers(sc)
-        return am.meta_window(sc.spaces("init"), sc.task_mask, sc.cluster, p, k_act,
-                              x["max_steps"], x["grow"])
+        init = jax.tree.map(lambda a: a[s], prep_init)
+        return am.meta_window(init, sc.task_mask, sc.cluster, p, k_act, x["max_steps"],
+                              x["grow"])
 
     k_enter, k_last = jax.vmap(window)(s_idx, flat_path, act.step.reshape(L))
     length = jnp.maximum(k_last - k_enter + 1.0, 0.0)
@@ -102,10 +107,13 @@ def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, ch
 
     def targets(i, k):
         """(in a meta region, R_M) at sample k of lane i."""
-        sc = jax.tree.map(lambda a: a[s_idx[i]], scenes)
+        s = s_idx[i]
+        sc = jax.tree.map(lambda a: a[s], scenes)
+        init = jax.tree.map(lambda a: a[s], prep_init)
+        opt = jax.tree.map(lambda a: a[s], prep_opt)
         p = am.sample(jax.tree.map(lambda a: a[i], flat_path), k)
-        return meta_target(sc.spaces("init"), sc.spaces("opt"), sc.task_mask, sc.cluster,
-                              _orient(sc), p, sc.activation_tol)
+        return meta_target(init, opt, sc.task_mask, sc.cluster, _orient(sc), p,
+                           sc.activation_tol)
 
     def run_block(c, b, r, n):
         lanes = jax.lax.dynamic_slice(order, (b * B,), (B,))

@@ -20,24 +20,24 @@ from jaxtyping import Array, Bool, Float, Int
 from . import quaternion as quat
 from . import shapes
 from .orientation import task_orientation
-from .types import Spaces
 
-_all_sdf = jax.vmap(shapes.sdf, in_axes=(0, 0, 0, 0, None))
 _all_orient = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))
 MIN_DISTANCE = 1e-6
 
 
-def meta_weights(opt: Spaces, in_cluster: Bool[Array, " T"], p: Float[Array, "3"]) -> Array:
-    d = jnp.maximum(_all_sdf(opt.kind, opt.center, opt.quat, opt.dims, p), MIN_DISTANCE)
+def meta_weights(opt: shapes.Prepared, in_cluster: Bool[Array, " T"],
+                 p: Float[Array, "3"]) -> Array:
+    d = jnp.maximum(shapes.all_sdf(opt, p), MIN_DISTANCE)
     w = jnp.where(in_cluster, 1.0 / (d * d), 0.0)
     return w / jnp.maximum(jnp.sum(w), jnp.finfo(w.dtype).tiny)
 
 
-def meta_target(init: Spaces, opt: Spaces, mask: Bool[Array, " T"], cluster: Int[Array, " T"],
-                orient, p: Float[Array, "3"], tau: Array) -> tuple[Array, Float[Array, "4"]]:
+def meta_target(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
+                cluster: Int[Array, " T"], orient, p: Float[Array, "3"],
+                tau: Array) -> tuple[Array, Float[Array, "4"]]:
     """(p is in a meta region, R_M(p) of that region's cluster)."""
     member = mask & (cluster >= 0)
-    sd = _all_sdf(init.kind, init.center, init.quat, init.dims, p)
+    sd = shapes.all_sdf(init, p)
     inside = member & (sd <= tau)
     chosen = cluster[jnp.argmin(jnp.where(inside, sd, jnp.inf))]
     w = meta_weights(opt, member & (cluster == chosen), p)

@@ -18,8 +18,6 @@ from . import quaternion as quat
 from . import shapes
 from .types import Spaces
 
-_all_sdf = jax.vmap(shapes.sdf, in_axes=(0, 0, 0, 0, None))
-
 
 def _sample_local(kind, dims, u):
     theta = 2.0 * jnp.pi * u[..., 1]
@@ -38,13 +36,13 @@ def _sample_local(kind, dims, u):
 def clutteredness_mc(spaces: Spaces, mask, key, n_samples: int = 1 << 16):
     T = mask.shape[0]
     keys = jax.random.split(key, T)
+    prepared = shapes.prepare_all(*spaces)
 
     def inside_fractions(kind, center, q, dims, k):
         u = jax.random.uniform(k, (n_samples, 3), dtype=center.dtype)
         local = _sample_local(kind, dims, u)
         world = center + local @ quat.to_matrix(q).T
-        sd = jax.vmap(lambda p: _all_sdf(spaces.kind, spaces.center, spaces.quat,
-                                         spaces.dims, p))(world)
+        sd = jax.vmap(lambda p: shapes.all_sdf(prepared, p))(world)
         return jnp.mean(sd <= 0.0, axis=0)
 
     frac = jax.vmap(inside_fractions)(spaces.kind, spaces.center, spaces.quat, spaces.dims, keys)

@@ -16,6 +16,9 @@ on the axis, so the azimuth never matters.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
@@ -47,9 +50,9 @@ def _cylinder_local(p: Array, r: Array, h: Array) -> tuple[Array, Array]:
     return sdf, proj
 
 
-def _cone_local(p: Array, length: Array, alpha: Array) -> tuple[Array, Array]:
-    alpha = _cone_angle(alpha)
-    radius = length * jnp.tan(alpha)
+def _cone_local(p: Array, length: Array, trig: Array) -> tuple[Array, Array]:
+    tan_a, cos_a, sin_a = trig[0], trig[1], trig[2]
+    radius = length * tan_a
     rho = _safe_norm(p[:2])
     z = p[2]
     # Lateral segment (0, 0) -> (radius, length) of the meridian triangle.
@@ -61,7 +64,7 @@ def _cone_local(p: Array, length: Array, alpha: Array) -> tuple[Array, Array]:
     q2 = jnp.stack([rho, z])
     d_lat = _safe_norm(q2 - lat)
     d_base = _safe_norm(q2 - base)
-    inside = (z <= length) & (rho * jnp.cos(alpha) <= z * jnp.sin(alpha))
+    inside = (z <= length) & (rho * cos_a <= z * sin_a)
     dist = jnp.minimum(d_lat, d_base)
     sdf = jnp.where(inside, -dist, dist)
     near = jnp.where(d_lat <= d_base, lat, base)
@@ -76,14 +79,28 @@ def _box_local(p: Array, e: Array) -> tuple[Array, Array]:
     return sdf, jnp.clip(p, -e, e)
 
 
-def to_local(p: Float[Array, "3"], center: Float[Array, "3"], q: Float[Array, "4"]) -> Array:
-    return quat.matvec(quat.to_matrix(q).T, p - center)
+class Prepared(NamedTuple):
+    """A posed shape with what every query needs computed once: the rotation matrix
+    and, for cones, tan, cos and sin of the half angle (three transcendentals that a
+    query would otherwise repeat for every point)."""
+
+    kind: Int[Array, ""]
+    center: Float[Array, "3"]
+    rot: Float[Array, "3 3"]
+    dims: Float[Array, "3"]
+    trig: Float[Array, "3"]
 
 
-def sdf_and_project_local(kind: Int[Array, ""], dims: Float[Array, "3"],
+def prepare(kind, center, q, dims) -> Prepared:
+    alpha = _cone_angle(dims[1])
+    trig = jnp.stack([jnp.tan(alpha), jnp.cos(alpha), jnp.sin(alpha)])
+    return Prepared(kind, center, quat.to_matrix(q), dims, trig)
+
+
+def sdf_and_project_local(kind: Int[Array, ""], dims: Float[Array, "3"], trig: Array,
                           p: Float[Array, "3"]) -> tuple[Array, Array]:
     s_cyl, p_cyl = _cylinder_local(p, dims[0], dims[1])
-    s_cone, p_cone = _cone_local(p, dims[0], dims[1])
+    s_cone, p_cone = _cone_local(p, dims[0], trig)
     s_box, p_box = _box_local(p, dims)
     is_cone = kind == CONE
     is_box = kind == BOX
@@ -92,16 +109,23 @@ def sdf_and_project_local(kind: Int[Array, ""], dims: Float[Array, "3"],
     return sdf, proj
 
 
+def prepared_sdf(s: Prepared, p: Float[Array, "3"]) -> Float[Array, ""]:
+    return sdf_and_project_local(s.kind, s.dims, s.trig, quat.matvec(s.rot.T, p - s.center))[0]
+
+
+def prepared_project(s: Prepared, p: Float[Array, "3"]) -> Float[Array, "3"]:
+    local = sdf_and_project_local(s.kind, s.dims, s.trig, quat.matvec(s.rot.T, p - s.center))[1]
+    return s.center + quat.matvec(s.rot, local)
+
+
 def sdf(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, ""]:
     """Exact Euclidean signed distance (negative inside) of a posed shape."""
-    return sdf_and_project_local(kind, dims, to_local(p, center, q))[0]
+    return prepared_sdf(prepare(kind, center, q, dims), p)
 
 
 def project(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, "3"]:
     """Closest point of the (solid) shape to ``p``; ``p`` itself when inside."""
-    rot = quat.to_matrix(q)
-    local = sdf_and_project_local(kind, dims, quat.matvec(rot.T, p - center))[1]
-    return center + quat.matvec(rot, local)
+    return prepared_project(prepare(kind, center, q, dims), p)
 
 
 # --------------------------------------------------------------------------------------
@@ -181,11 +205,10 @@ def _ray_cylinder(o, d, r, h, grow):
     return _cap(a, b, za, zb)
 
 
-def _ray_cone(o, d, length, alpha, grow):
-    alpha = _cone_angle(alpha)
-    z0 = -grow / jnp.sin(alpha)
+def _ray_cone(o, d, length, trig, grow):
+    z0 = -grow / trig[2]
     oz = o[2] - z0
-    k2 = jnp.tan(alpha) ** 2
+    k2 = trig[0] ** 2
     A = k2 * d[2] ** 2 - d[0] ** 2 - d[1] ** 2
     B = k2 * oz * d[2] - o[0] * d[0] - o[1] * d[1]
     C = k2 * oz * oz - o[0] ** 2 - o[1] ** 2
@@ -207,9 +230,14 @@ def ray_interval(kind, center, q, dims, origin: Float[Array, "3"], direction: Fl
     """(lo, hi) containing every t with sdf(origin + t direction) <= ``grow``-ish: the
     exact tau-sublevel set lies inside it whenever ``grow`` >= tau + rounding slack.
     Empty when lo > hi."""
-    rot = quat.to_matrix(q)
-    o = quat.matvec(rot.T, origin - center)
-    d = quat.matvec(rot.T, direction)
+    return prepared_ray_interval(prepare(kind, center, q, dims), origin, direction, grow)
+
+
+def prepared_ray_interval(s: Prepared, origin: Float[Array, "3"], direction: Float[Array, "3"],
+                          grow: Float[Array, ""]) -> tuple[Array, Array]:
+    kind, dims = s.kind, s.dims
+    o = quat.matvec(s.rot.T, origin - s.center)
+    d = quat.matvec(s.rot.T, direction)
     # Re-centre the ray at its point closest to the local origin: the quadratics'
     # coefficients then scale with the ray's distance from the shape, not from the
     # start, and their cancellation error shrinks accordingly (a float32 ray through
@@ -217,7 +245,7 @@ def ray_interval(kind, center, q, dims, origin: Float[Array, "3"], direction: Fl
     t0 = -jnp.dot(o, d)
     o = o + t0 * d
     a_c, b_c = _ray_cylinder(o, d, dims[0], dims[1], grow)
-    a_k, b_k = _ray_cone(o, d, dims[0], dims[1], grow)
+    a_k, b_k = _ray_cone(o, d, dims[0], s.trig, grow)
     a_b, b_b = _ray_box(o, d, dims, grow)
     is_cone, is_box = kind == CONE, kind == BOX
     lo = jnp.where(is_box, a_b, jnp.where(is_cone, a_k, a_c))
@@ -230,3 +258,12 @@ def volume(kind, dims: Float[Array, "3"]) -> Float[Array, ""]:
     cone = jnp.pi / 3.0 * (dims[0] * jnp.tan(_cone_angle(dims[1]))) ** 2 * dims[0]
     box = 8.0 * dims[0] * dims[1] * dims[2]
     return jnp.where(kind == BOX, box, jnp.where(kind == CONE, cone, cyl))
+
+
+def prepare_all(kind, center, q, dims) -> Prepared:
+    """:func:`prepare` over a leading task axis."""
+    return jax.vmap(prepare)(kind, center, q, dims)
+
+
+all_sdf = jax.vmap(prepared_sdf, in_axes=(0, None))
+all_ray_intervals = jax.vmap(prepared_ray_interval, in_axes=(0, None, None, None))

@@ -69,9 +69,16 @@ class Scenes(NamedTuple):
             out[name] = jnp.asarray(a)
         return cls(**out)
 
-    def spaces(self, which: str) -> Spaces:
+    def raw_spaces(self, which: str) -> Spaces:
         return Spaces(self.kind, getattr(self, f"center_{which}"), getattr(self, f"quat_{which}"),
                       getattr(self, f"dims_{which}"))
+
+    def spaces(self, which: str):
+        """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation matrices
+        and cone trigonometry computed once): a ``shapes.Prepared`` over tasks."""
+        from .shapes import prepare_all
+
+        return prepare_all(*self.raw_spaces(which))
 
 
 class Rollouts(NamedTuple):

@@ -13,6 +13,7 @@ each with a 95 % percentile-bootstrap CI over scenes.
 from __future__ import annotations
 
 import importlib.metadata as md
+import multiprocessing
 import platform
 import sys
 import time
@@ -84,7 +85,8 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     items += [("random", r, dict(overrides or {})) for r in randoms]
     print(f"reproduce: {len(manual)} manual + {n_random} random scenes, modes "
           f"{', '.join(MODES)}", flush=True)
-    with ProcessPoolExecutor(workers) as pool:
+    # spawn, not fork: forking a process in which JAX has started threads can deadlock.
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         results = list(tqdm(pool.map(_precompute_task, items), total=len(items),
                             desc="precompute", unit="scene", file=sys.stdout))
     t_pre = time.perf_counter()

@@ -166,6 +166,6 @@ def test_montecarlo_clutteredness_agrees_with_mesh(shipped_results, shipped_bake
     for s, r in enumerate(shipped_results):
         for which, c_mesh in (("init", r.C_init), ("opt", r.C_final)):
             k = jax.random.fold_in(key, 2 * s + (which == "opt"))
-            spaces = jax.tree.map(lambda a, s=s: a[s], sc.spaces(which))
+            spaces = jax.tree.map(lambda a, s=s: a[s], sc.raw_spaces(which))
             c = float(shacc_jax.clutteredness_mc(spaces, sc.task_mask[s], k, 1 << 16))
             assert abs(c - c_mesh) < 0.01, (r.scene.name, which, c, c_mesh)

@@ -14,6 +14,7 @@ from geometry_precompute.frames import frame_from_approach as cpu_frame
 from shacc_jax import quaternion as quat
 from shacc_jax.meta import meta_target, meta_weights
 from shacc_jax.orientation import frame_from_approach, task_orientation
+from shacc_jax.shapes import prepare_all
 from shacc_jax.types import Spaces
 
 
@@ -145,6 +146,7 @@ def _two_cylinders():
 def test_meta_weights_inverse_square():
     _, opt = _two_cylinders()
     p = jnp.array([-0.15, 0.0, 0.0])
+    opt = prepare_all(*opt)
     w = np.asarray(meta_weights(opt, jnp.array([True, True, False]), p))
     d = np.array([np.hypot(0.15, 0.1) - 0.05] * 2)
     expected = (1 / d**2) / np.sum(1 / d**2)
@@ -157,7 +159,7 @@ def test_meta_weights_inverse_square():
 
 
 def test_meta_target_region_and_mask():
-    init, opt = _two_cylinders()
+    init, opt = (prepare_all(*s) for s in _two_cylinders())
     orient = (jnp.ones(3, jnp.int32), jnp.tile(jnp.array([1.0, 0, 0, 0]), (3, 1)),
               jnp.array([[0.0, -0.1], [0.0, 0.1], [5.0, 0.0]]))
     cluster = jnp.array([0, 0, -1])
