@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import OBJECT_DEFAULTS, Scene, SceneObject, Task
+from .scene import Scene, SceneObject, Task
+from .settings import OBJECT_DEFAULTS
 
 TABLE_HALF = 0.30
 GAUSSIAN_SIGMA = 0.10

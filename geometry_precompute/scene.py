@@ -24,12 +24,8 @@ from typing import Any
 import tomli_w
 
 from .errors import InputError
-from .settings import DEFAULTS, Settings
+from .settings import DEFAULTS, OBJECT_DEFAULTS, Settings
 
-OBJECT_DEFAULTS = {
-    "mug": {"radius": 0.045, "height": 0.10},
-    "cup": {"radius": 0.040, "height": 0.09},
-}
 OBJECT_KINDS = ("mug", "cup", "box")
 TEMPLATE_OBJECTS = {
     "side_grasp": ("mug", "cup"),

@@ -95,6 +95,13 @@ _SPECS: list[SettingSpec] = [
 
 SPECS: Mapping[str, SettingSpec] = MappingProxyType({s.name: s for s in _SPECS})
 
+# Object dimensions (SPEC section 3): per-object fields of a scene file, not settings,
+# but defaults all the same, so they live here too.
+OBJECT_DEFAULTS: Mapping[str, Mapping[str, float]] = MappingProxyType({
+    "mug": MappingProxyType({"radius": 0.045, "height": 0.10}),
+    "cup": MappingProxyType({"radius": 0.040, "height": 0.09}),
+})
+
 
 def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
     """Convert ``value`` to the setting's type or raise InputError."""

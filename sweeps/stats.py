@@ -31,18 +31,20 @@ def mean_ci(values, n_resamples: int = 10_000, seed: int = 0,
 
 
 def pearson_ci(x, y, n_resamples: int = 10_000, seed: int = 0, level: float = 0.95) -> dict:
-    """{"rho": r, "ci": [lo, hi], "p": p}: Pearson's rho with a paired percentile
-    bootstrap CI (resamples whose x or y is constant have no rho and are dropped)."""
+    """{"rho": r, "ci": [lo, hi], "p": p}: Pearson's rho (scipy.stats.pearsonr) with a
+    paired percentile-bootstrap CI (scipy.stats.bootstrap), resampling scenes. None
+    where rho is undefined (fewer than three scenes, or a constant measure)."""
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     if x.size < 3 or np.all(x == x[0]) or np.all(y == y[0]):
         return {"rho": None, "ci": None, "p": None}
     r = stats.pearsonr(x, y)
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, x.size, size=(n_resamples, x.size))
-    xs, ys = x[idx], y[idx]
-    ok = (xs.std(axis=1) > 0) & (ys.std(axis=1) > 0)
-    rhos = stats.pearsonr(xs[ok], ys[ok], axis=1).statistic
-    alpha = (1 - level) / 2
-    lo, hi = np.percentile(rhos, [100 * alpha, 100 * (1 - alpha)])
-    return {"rho": float(r.statistic), "ci": [float(lo), float(hi)], "p": float(r.pvalue)}
+
+    def rho(a, b, axis):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return stats.pearsonr(a, b, axis=axis).statistic
+
+    res = stats.bootstrap((x, y), rho, paired=True, vectorized=True, n_resamples=n_resamples,
+                          method="percentile", confidence_level=level,
+                          rng=np.random.default_rng(seed))
+    return {"rho": float(r.statistic), "ci": _ci(res), "p": float(r.pvalue)}
