@@ -11,22 +11,12 @@ import sys
 import time
 from collections.abc import Sequence
 
-from geometry_precompute import InputError, load_scene, precompute
-from geometry_precompute.settings import parse_cli_value
+from geometry_precompute import InputError
 
 from .evaluate_cmd import add_evaluate
 from .output import precompute_json, write_json
+from .pipeline import load_and_precompute
 from .reproduce import add_reproduce
-
-
-def _parse_sets(pairs: Sequence[str]) -> dict:
-    out = {}
-    for item in pairs:
-        if "=" not in item:
-            raise InputError("<--set>", item, "must be NAME=VALUE")
-        name, text = item.split("=", 1)
-        out[name.strip()] = parse_cli_value(name.strip(), text.strip())
-    return out
 
 
 def _fmt_params(space, q) -> str:
@@ -61,9 +51,7 @@ def print_precompute(r, wall: float) -> None:
 
 def cmd_precompute(args) -> int:
     t0 = time.perf_counter()
-    scene = load_scene(args.scene)
-    settings = scene.settings(overrides=_parse_sets(args.set))
-    r = precompute(scene, settings)
+    r = load_and_precompute(args.scene, args.set)
     wall = time.perf_counter() - t0
     print_precompute(r, wall)
     if args.json:

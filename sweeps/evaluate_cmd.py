@@ -6,11 +6,10 @@ from __future__ import annotations
 import time
 
 import shacc_jax
-from geometry_precompute import load_scene, precompute
 from shacc_jax.types import OUTCOMES
 
 from .output import write_json
-from .pipeline import evaluate_results, scene_json
+from .pipeline import evaluate_results, load_and_precompute, scene_json
 
 
 def print_summary(ev, s: int = 0) -> None:
@@ -39,12 +38,8 @@ def print_summary(ev, s: int = 0) -> None:
 
 
 def cmd_evaluate(args) -> int:
-    from .cli import _parse_sets
-
     t0 = time.perf_counter()
-    scene = load_scene(args.scene)
-    settings = scene.settings(overrides=_parse_sets(args.set))
-    r = precompute(scene, settings)
+    r = load_and_precompute(args.scene, args.set)
     t1 = time.perf_counter()
     ev = evaluate_results([r], args.modes)
     print_summary(ev)

@@ -11,10 +11,35 @@ import jax
 import numpy as np
 
 import shacc_jax
-from geometry_precompute import BakedScenes, PrecomputeResult, bake
+from geometry_precompute import (
+    BakedScenes,
+    InputError,
+    PrecomputeResult,
+    bake,
+    load_scene,
+    precompute,
+)
+from geometry_precompute.settings import parse_cli_value
 from shacc_jax.types import OUTCOMES, Evaluation
 
 from .output import precompute_json
+
+
+def parse_sets(pairs: Sequence[str]) -> dict:
+    """``--set NAME=VALUE`` arguments as a dict of settings (validated later)."""
+    out = {}
+    for item in pairs:
+        if "=" not in item:
+            raise InputError("<--set>", item, "must be NAME=VALUE")
+        name, text = item.split("=", 1)
+        out[name.strip()] = parse_cli_value(name.strip(), text.strip())
+    return out
+
+
+def load_and_precompute(path: str, sets: Sequence[str]) -> PrecomputeResult:
+    """One scene file with ``--set`` overrides (SPEC section 16's precedence)."""
+    scene = load_scene(path)
+    return precompute(scene, scene.settings(overrides=parse_sets(sets)))
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from geometry_precompute import (
 
 from . import plots
 from .output import write_atomic, write_json
-from .pipeline import evaluate_results
+from .pipeline import evaluate_results, parse_sets
 from .stats import mean_ci, pearson_ci
 
 MODES = shacc_jax.MODES
@@ -369,12 +369,10 @@ def update_readme(readme: Path, out: Path, summary: dict) -> None:
 
 
 def cmd_reproduce(args) -> int:
-    from .cli import _parse_sets
-
     n_random = args.random_scenes if args.random_scenes is not None else (4 if args.quick
                                                                            else 20)
     grid = args.field_grid if args.field_grid is not None else (16 if args.quick else 64)
-    run(Path(args.out), n_random, args.seed, args.quick, grid, _parse_sets(args.set),
+    run(Path(args.out), n_random, args.seed, args.quick, grid, parse_sets(args.set),
         args.workers, Path(args.readme) if args.readme else None)
     return 0
 
