@@ -17,6 +17,7 @@ from .evaluate_cmd import add_evaluate
 from .output import precompute_json, write_json
 from .pipeline import load_and_precompute
 from .reproduce import add_reproduce
+from .runner import add_sweep
 
 
 def _fmt_params(space, q) -> str:
@@ -71,6 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
     pre.set_defaults(func=cmd_precompute)
     add_evaluate(sub)
     add_reproduce(sub)
+    add_sweep(sub)
     return p
 
 

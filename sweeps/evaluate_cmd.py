@@ -26,7 +26,7 @@ def print_summary(ev, s: int = 0) -> None:
                           "  ".join("[" + ", ".join(ids[i] for i in c) + "]" for c in meta)))
     n_starts = ev.baked.n_starts
     print(f"rollouts per mode: {int(me.n_rollouts[s, 0])} ({n_starts} starts x {len(ids)} tasks)")
-    head = f"{'mode':<10} {'success':>8} " + " ".join(f"{o:>9}" for o in OUTCOMES[:4]) + \
+    head = f"{'mode':<10} {'rate':>8} " + " ".join(f"{o:>9}" for o in OUTCOMES[:4]) + \
         f" {'mean dR (rad)':>14}"
     print(head)
     print("-" * len(head))

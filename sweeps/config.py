@@ -1,0 +1,188 @@
+"""Sweep configurations (SPEC section 12): a scene source, the modes, and axes
+over any setting of SPEC section 16, validated in full before any work starts.
+
+    name = "speed"
+    modes = ["baseline", "shrinking", "shacc"]   # optional, default all three
+    chunk = 32                                   # optional: scenes per saved chunk
+
+    [source]                                     # the random generator ...
+    kind = "random"
+    count = 200
+    tasks = [5, 10]
+    sampling = "both"                            # "uniform" | "gaussian" | "both"
+    seed = 0
+    # ... or scene files:  kind = "files"; path = "scenes/" (relative to this file)
+
+    [axes]                                       # grid product of the listed values
+    v_max = [0.1, 0.15, 0.2]
+    shrink_step = [0.05, 0.1]
+
+    [[points]]                                   # and/or explicit points
+    v_max = 0.3
+
+Points are the axes' grid product (in the order written, the last axis fastest)
+followed by the explicit points; with neither, the one point of the defaults.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import shacc_jax
+from geometry_precompute import DEFAULTS, SPECS, InputError, load_scene, random_scene
+from geometry_precompute.scene import Scene, scene_to_dict
+
+_TOP = {"name", "modes", "chunk", "source", "axes", "points"}
+_RANDOM = {"kind", "count", "tasks", "sampling", "seed"}
+_FILES = {"kind", "path"}
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    name: str
+    modes: tuple[str, ...]
+    chunk: int
+    source: dict
+    points: list[dict]
+    base_dir: Path
+
+    def scenes(self) -> list[Scene]:
+        src = self.source
+        if src["kind"] == "files":
+            folder = self.base_dir / src["path"]
+            return [load_scene(p) for p in sorted(folder.glob("*.toml"))]
+        kinds = {"uniform": ["uniform"], "gaussian": ["gaussian"],
+                 "both": ["uniform", "gaussian"]}[src["sampling"]]
+        lo, hi = src["tasks"]
+        return [random_scene(src["seed"] + i, kinds[i % len(kinds)], lo, hi)
+                for i in range(src["count"])]
+
+    def resolved(self) -> dict:
+        """Everything that decides the results, as plain data (and so the hash)."""
+        scenes = [scene_to_dict(s) for s in self.scenes()] if self.source["kind"] == "files" \
+            else None
+        return {"name": self.name, "modes": list(self.modes), "chunk": self.chunk,
+                "source": self.source, "scene_files": scenes,
+                "points": self.points, "defaults": DEFAULTS.to_dict(),
+                "shacc_version": _version()}
+
+    def hash(self) -> str:
+        blob = json.dumps(self.resolved(), sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _version() -> str:
+    import importlib.metadata as md
+
+    try:
+        return md.version("shacc")
+    except md.PackageNotFoundError:
+        return "unknown"
+
+
+def _int(v: Any, src: str, fld: str, lo: int = 0) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        raise InputError(src, fld, f"must be an integer >= {lo}, got {v!r}")
+    return v
+
+
+def _check_point(point: Any, src: str, where: str) -> dict:
+    if not isinstance(point, Mapping):
+        raise InputError(src, where, "must be a table of setting = value")
+    for name in point:
+        if name not in SPECS:
+            raise InputError(src, f"{where}.{name}", "unknown setting (SPEC section 16 names)")
+    DEFAULTS.with_overrides(point, src, where + ".")  # validates each value
+    return dict(point)
+
+
+def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
+    src = str(source)
+    for key in data:
+        if key not in _TOP:
+            raise InputError(src, key, f"unknown field (allowed: {sorted(_TOP)})")
+    name = data.get("name", Path(src).stem)
+    if not isinstance(name, str) or not name:
+        raise InputError(src, "name", "must be a non-empty string")
+    modes = data.get("modes", list(shacc_jax.MODES))
+    if not isinstance(modes, list) or not modes or any(m not in shacc_jax.MODES for m in modes) \
+            or len(set(modes)) != len(modes):
+        raise InputError(src, "modes", f"must be distinct names from {list(shacc_jax.MODES)}")
+    chunk = _int(data.get("chunk", 32), src, "chunk", 1)
+    raw = data.get("source")
+    if not isinstance(raw, Mapping) or "kind" not in raw:
+        raise InputError(src, "source.kind", "missing: \"random\" or \"files\"")
+    if raw["kind"] == "random":
+        for key in raw:
+            if key not in _RANDOM:
+                raise InputError(src, f"source.{key}", f"unknown field for random scenes "
+                                 f"(allowed: {sorted(_RANDOM)})")
+        tasks = raw.get("tasks", [5, 10])
+        if not (isinstance(tasks, list) and len(tasks) == 2
+                and all(isinstance(t, int) and not isinstance(t, bool) for t in tasks)
+                and 1 <= tasks[0] <= tasks[1]):
+            raise InputError(src, "source.tasks", "must be [min, max] with 1 <= min <= max")
+        sampling = raw.get("sampling", "both")
+        if sampling not in ("uniform", "gaussian", "both"):
+            raise InputError(src, "source.sampling", "must be uniform, gaussian or both")
+        source_out = {"kind": "random", "count": _int(raw.get("count"), src, "source.count", 1),
+                      "tasks": list(tasks), "sampling": sampling,
+                      "seed": _int(raw.get("seed", 0), src, "source.seed")}
+    elif raw["kind"] == "files":
+        for key in raw:
+            if key not in _FILES:
+                raise InputError(src, f"source.{key}", "unknown field for scene files "
+                                 f"(allowed: {sorted(_FILES)})")
+        path = raw.get("path")
+        if not isinstance(path, str) or not (base_dir / path).is_dir():
+            raise InputError(src, "source.path", f"must name a folder of scene files, got "
+                             f"{path!r}")
+        if not list((base_dir / path).glob("*.toml")):
+            raise InputError(src, "source.path", f"no *.toml scene files in {path!r}")
+        source_out = {"kind": "files", "path": path}
+    else:
+        raise InputError(src, "source.kind", f"must be random or files, got {raw['kind']!r}")
+
+    axes = data.get("axes", {})
+    if not isinstance(axes, Mapping):
+        raise InputError(src, "axes", "must be a table of setting = [values]")
+    for k, values in axes.items():
+        if not isinstance(values, list) or not values:
+            raise InputError(src, f"axes.{k}", "must be a non-empty list of values")
+        for v in values:
+            _check_point({k: v}, src, "axes")
+    points = [dict(zip(axes, combo, strict=True)) for combo in
+              itertools.product(*axes.values())] if axes else []
+    explicit = data.get("points", [])
+    if not isinstance(explicit, list):
+        raise InputError(src, "points", "must be an array of tables ([[points]])")
+    points += [_check_point(p, src, f"points[{i}]") for i, p in enumerate(explicit)]
+    if not points:
+        points = [{}]
+    cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir)
+    cfg.scenes()  # scene files are loaded (and validated) before any work starts
+    for i, p in enumerate(points):
+        for s in cfg.scenes()[:1]:
+            s.settings(DEFAULTS, p)  # a point against a scene's own [settings]
+        if p.get("collision", "off") != "off":
+            raise InputError(src, f"points[{i}].collision",
+                             "'mjx' collision checking is not available in this version")
+    return cfg
+
+
+def load_config(path: str | Path) -> SweepConfig:
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(path, "<file>", "no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
+    return parse_config(data, str(path), path.parent)

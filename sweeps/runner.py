@@ -1,0 +1,284 @@
+"""The sweep runner (SPEC section 12): precompute on CPU in worker processes with a
+disk cache, evaluate on the accelerator in chunks spread over the local devices,
+write Parquet, and resume after any interruption.
+
+Work is a list of chunks, each of one sweep point and up to ``chunk`` scenes, in a
+fixed order. A finished chunk is two Parquet files in ``OUT/parts/``, each written
+to a temporary name and renamed, the per-rollout part first: a chunk counts as done
+when its per-scene part exists, so a run killed at any moment (SIGKILL included)
+leaves only whole chunks, and the rerun redoes the unfinished ones. When every
+chunk is done, the parts are joined into ``OUT/scenes.parquet`` and
+``OUT/rollouts.parquet`` (also atomically); a rerun of a finished sweep does
+nothing.
+
+The precompute cache (``--cache``, default ``~/.cache/shacc/precompute``) stores one
+pickle per (scene, precompute-stage settings) hash, so a rollout setting never
+triggers a new precompute and overlapping sweeps share results.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import multiprocessing
+import os
+import pickle
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import jax
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+from tqdm import tqdm
+
+import shacc_jax
+from geometry_precompute import DEFAULTS, InputError, bake, precompute
+from geometry_precompute.scene import Scene, scene_to_dict
+from shacc_jax.types import OUTCOMES
+
+from .config import SweepConfig
+from .output import write_atomic, write_json
+
+# Device memory one rollout needs during evaluation, measured from the 10 000-scene
+# run on the H200 (rollout outputs, the activation pass and the tracking blocks) with
+# a safety factor: chunks are sized so that a chunk uses at most half the free memory.
+BYTES_PER_ROLLOUT = 600
+# Throughputs measured in benchmarks/RESULTS.md, for --dry-run's time estimate.
+RATES = {"cpu": 3.5e4, "gpu": 3.0e7}
+
+
+def default_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "shacc" / "precompute"
+
+
+@dataclass(frozen=True)
+class Chunk:
+    index: int
+    point: int
+    scenes: tuple[int, ...]
+
+
+def plan(cfg: SweepConfig, n_scenes: int, chunk: int) -> list[Chunk]:
+    out = []
+    for p in range(len(cfg.points)):
+        for start in range(0, n_scenes, chunk):
+            out.append(Chunk(len(out), p, tuple(range(start, min(start + chunk, n_scenes)))))
+    return out
+
+
+def cache_key(scene: Scene, settings) -> str:
+    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute")},
+                      sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+def _precompute_cached(args):
+    scene, overrides, cache = args
+    settings = scene.settings(DEFAULTS, overrides)
+    path = Path(cache) / f"{cache_key(scene, settings)}.pkl"
+    if path.exists():
+        try:
+            with path.open("rb") as f:
+                r = pickle.load(f)
+            return replace(r, settings=settings), True
+        except (OSError, pickle.UnpicklingError, EOFError):
+            pass  # a damaged entry is recomputed and rewritten
+    r = precompute(scene, settings)
+    write_atomic(path, pickle.dumps(r))
+    return r, False
+
+
+def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
+    """Scenes per chunk: the config's, lowered if the device's free memory is short."""
+    dev = jax.local_devices()[0]
+    stats = dev.memory_stats() if hasattr(dev, "memory_stats") else None
+    if stats and "bytes_limit" in stats:
+        free = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
+    else:
+        free = 2 << 30  # CPU: keep a chunk under ~1 GiB of working memory
+    per_scene = BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * \
+        len(cfg.modes) * len(jax.local_devices())
+    return max(1, min(cfg.chunk, int(0.5 * free // per_scene)))
+
+
+def evaluate_sharded(baked, modes):
+    """Evaluate on every local device: the scenes are split in equal parts (the last
+    padded by repeating a scene), each part dispatched to its device; JAX runs them
+    concurrently and the results are joined in order."""
+    devices = jax.local_devices()
+    S = baked.n_scenes
+    if len(devices) == 1 or S == 1:
+        return jax.tree.map(np.asarray, shacc_jax.evaluate(baked, modes))
+    scenes = shacc_jax.Scenes.from_bake(baked)
+    per = math.ceil(S / len(devices))
+    pad = per * len(devices) - S
+    if pad:
+        scenes = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), scenes)
+    outs = []
+    for k, dev in enumerate(devices):
+        part = jax.tree.map(lambda a, k=k, dev=dev: jax.device_put(a[k * per:(k + 1) * per], dev),
+                            scenes)
+        outs.append(shacc_jax.evaluate(part, modes))
+    joined = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs]), *outs)
+    return jax.tree.map(lambda a: a[:S], joined)
+
+
+def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, ...]:
+    point = cfg.points[chunk.point]
+    ro, me = ev.rollouts, ev.metrics
+    rows = []
+    for i, (si, r) in enumerate(zip(chunk.scenes, results, strict=True)):
+        row = {"point": chunk.point, **{f"set.{k}": str(v) for k, v in point.items()},
+               "scene_index": si, "scene": r.scene.name, "n_tasks": len(r.spaces),
+               "C_init": r.C_init, "C_final": r.C_final, "d": r.d, "h": r.h}
+        for m, mode in enumerate(cfg.modes):
+            dr = me.delta_R_mean[i, m]
+            row[f"{mode}.success"] = float(me.u_scene[i, m])
+            row[f"{mode}.delta_R_mean"] = float(dr) if np.isfinite(dr) else np.nan
+            for o, name in enumerate(OUTCOMES):
+                row[f"{mode}.n_{name}"] = int(me.outcome_counts[i, m, o])
+        rows.append(row)
+    scenes_df = pd.DataFrame(rows)
+    S, M, N, T = ro.outcome.shape
+    s_i, m_i, n_i, t_i = np.meshgrid(np.arange(S), np.arange(M), np.arange(N), np.arange(T),
+                                     indexing="ij")
+    valid = ro.outcome >= 0
+    outcome_names = np.array(OUTCOMES)
+    rollouts_df = pd.DataFrame({
+        "point": np.full(valid.sum(), chunk.point, np.int32),
+        "scene_index": np.asarray(chunk.scenes)[s_i[valid]].astype(np.int32),
+        "mode": pd.Categorical(np.array(cfg.modes)[m_i[valid]], categories=list(cfg.modes)),
+        "start": n_i[valid].astype(np.int32),
+        "task": t_i[valid].astype(np.int16),
+        "outcome": pd.Categorical(outcome_names[ro.outcome[valid]], categories=list(OUTCOMES)),
+        "activated": ro.activated[valid].astype(np.int16),
+        "steps": ro.step[valid].astype(np.int32),
+        "delta_R": ro.delta_R[valid].astype(np.float32),
+    })
+    return scenes_df, rollouts_df
+
+
+def _write_parquet(path: Path, df: pd.DataFrame) -> None:
+    sink = pa.BufferOutputStream()
+    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), sink)
+    write_atomic(path, sink.getvalue().to_pybytes())
+
+
+def dry_run(cfg: SweepConfig) -> dict:
+    scenes = cfg.scenes()
+    points = cfg.points
+    rollouts = 0
+    for p in points:
+        s0 = scenes[0].settings(DEFAULTS, p)
+        ny, nz = s0["start_grid"]
+        rollouts += sum(len(s.tasks) for s in scenes) * ny * nz * len(cfg.modes)
+    platform = jax.default_backend()
+    rate = RATES["gpu" if platform in ("gpu", "cuda", "rocm") else "cpu"]
+    n_starts = max(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"]) for p in points)
+    chunk = _chunk_size(cfg, scenes, int(n_starts))
+    per_chunk = BYTES_PER_ROLLOUT * int(n_starts) * max(len(s.tasks) for s in scenes) * \
+        len(cfg.modes) * chunk
+    return {"points": len(points), "scenes": len(scenes), "scene_evaluations":
+            len(points) * len(scenes), "rollouts": int(rollouts), "chunk_scenes": chunk,
+            "estimated_memory_per_chunk_MB": per_chunk / 2**20, "devices":
+            [str(d) for d in jax.local_devices()], "estimated_rollout_seconds":
+            rollouts / rate, "rate_assumed_per_s": rate}
+
+
+def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
+              workers: int | None = None, progress: bool = True) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(cache or default_cache())
+    cache.mkdir(parents=True, exist_ok=True)
+    h = cfg.hash()
+    marker = out / "config.json"
+    if marker.exists():
+        previous = json.loads(marker.read_text())
+        if previous.get("hash") != h:
+            raise InputError(out, "config", f"this folder holds another sweep (hash "
+                             f"{previous.get('hash')}, this config {h}); use a new --out")
+    else:
+        write_json(marker, {"hash": h, "config": cfg.resolved()})
+    final_s, final_r = out / "scenes.parquet", out / "rollouts.parquet"
+    scenes = cfg.scenes()
+    starts = {int(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"])) for p in cfg.points}
+    chunk_n = _chunk_size(cfg, scenes, max(starts))
+    chunks = plan(cfg, len(scenes), chunk_n)
+    max_tasks = max(len(s.tasks) for s in scenes)
+    parts = out / "parts"
+    parts.mkdir(exist_ok=True)
+    todo = [c for c in chunks if not (parts / f"scenes-{c.index:06d}.parquet").exists()]
+    summary = {"hash": h, "chunks": len(chunks), "done_before": len(chunks) - len(todo)}
+    if not todo and final_s.exists() and final_r.exists():
+        summary["status"] = "nothing to do: the sweep is complete"
+        return summary
+    t0 = time.perf_counter()
+    n_rollouts = hits_total = computed = 0
+    ctx = multiprocessing.get_context("spawn")  # JAX threads make fork unsafe
+    bar = tqdm(total=len(chunks), initial=len(chunks) - len(todo), unit="chunk",
+               disable=not progress, file=sys.stdout, desc=cfg.name)
+    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+        for c in todo:
+            point = cfg.points[c.point]
+            args = [(scenes[i], point, str(cache)) for i in c.scenes]
+            got = list(pool.map(_precompute_cached, args))
+            results = [r for r, _ in got]
+            hits = sum(hit for _, hit in got)
+            hits_total += hits
+            computed += len(got) - hits
+            # One task count for every chunk, so chunks of a point share one compilation.
+            baked = bake(results, max_tasks)
+            ev = evaluate_sharded(baked, cfg.modes)
+            scenes_df, rollouts_df = _tables(cfg, c, results, ev)
+            _write_parquet(parts / f"rollouts-{c.index:06d}.parquet", rollouts_df)
+            _write_parquet(parts / f"scenes-{c.index:06d}.parquet", scenes_df)
+            n_rollouts += len(rollouts_df)
+            rate = n_rollouts / (time.perf_counter() - t0)
+            bar.set_postfix(rollouts=n_rollouts, rate=f"{rate:.3g}/s", cache_hits=hits)
+            bar.update(1)
+    bar.close()
+    for name, final in (("scenes", final_s), ("rollouts", final_r)):
+        files = [parts / f"{name}-{c.index:06d}.parquet" for c in chunks]
+        table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
+        sink = pa.BufferOutputStream()
+        pq.write_table(table, sink)
+        write_atomic(final, sink.getvalue().to_pybytes())
+    summary.update({"status": "complete", "rollouts_this_run": n_rollouts,
+                    "precompute_cache_hits": hits_total, "precomputed": computed,
+                    "seconds": time.perf_counter() - t0})
+    return summary
+
+
+def cmd_sweep(args) -> int:
+    from .config import load_config
+
+    cfg = load_config(args.config)
+    if args.dry_run:
+        info = dry_run(cfg)
+        for k, v in info.items():
+            print(f"{k}: {v:.4g}" if isinstance(v, float) else f"{k}: {v}")
+        return 0
+    if not args.out:
+        raise InputError("<arguments>", "--out", "required unless --dry-run")
+    summary = run_sweep(cfg, Path(args.out), Path(args.cache) if args.cache else None,
+                        args.workers, progress=not args.quiet)
+    print(json.dumps(summary))
+    return 0
+
+
+def add_sweep(sub) -> None:
+    p = sub.add_parser("sweep", help="a parameter sweep from a TOML config (resumable)")
+    p.add_argument("config", help="sweep config TOML")
+    p.add_argument("--out", help="output folder (resumes if it holds this sweep)")
+    p.add_argument("--dry-run", action="store_true", help="print sizes and estimates only")
+    p.add_argument("--cache", help="precompute cache folder (default ~/.cache/shacc/precompute)")
+    p.add_argument("--workers", type=int, default=None, help="precompute processes")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
