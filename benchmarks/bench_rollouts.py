@@ -70,6 +70,25 @@ def _load(path: str, n: int):
     return Scenes(**arrays)
 
 
+def _regrid(scenes, ny: int, nz: int):
+    """The same scenes with an ny x nz start grid over the baked grid's y and z range
+    (seeded random orientations), for start-grid scaling."""
+    import jax.numpy as jnp
+
+    st = np.asarray(scenes.starts)
+    S = st.shape[0]
+    y = np.linspace(st[:, :, 1].min(1), st[:, :, 1].max(1), ny, axis=1)  # (S, ny)
+    z = np.linspace(st[:, :, 2].min(1), st[:, :, 2].max(1), nz, axis=1)
+    yy = np.repeat(y, nz, axis=1)
+    zz = np.tile(z, (1, ny))
+    xx = np.repeat(st[:, :1, 0], ny * nz, axis=1)
+    q = np.random.default_rng(0).normal(size=(ny * nz, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    quats = np.broadcast_to(q, (S, ny * nz, 4))
+    new = np.concatenate([np.stack([xx, yy, zz], -1), quats], -1).astype(st.dtype)
+    return scenes._replace(starts=jnp.asarray(new))
+
+
 def cmd_run(args) -> None:
     import jax
 
@@ -83,8 +102,12 @@ def cmd_run(args) -> None:
         quaternion.MARKLEY_UNROLL = args.markley_unroll
     rows = []
     dev = jax.devices()[0]
+    if args.devices:
+        return _run_devices(args, modes)
     for n in args.sizes:
         scenes = _load(args.bake, n)
+        if args.grid:
+            scenes = _regrid(scenes, *args.grid)
         S, T = scenes.task_mask.shape
         N = scenes.starts.shape[1]
         rollouts = S * T * N * len(modes)
@@ -110,6 +133,30 @@ def cmd_run(args) -> None:
     _ = shacc_jax
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def _run_devices(args, modes) -> None:
+    """Wall time of evaluate_on_devices (results back on the host) with 1..K devices."""
+    import jax
+
+    import shacc_jax
+
+    for n in args.sizes:
+        scenes = _load(args.bake, n)
+        S, T = scenes.task_mask.shape
+        rollouts = S * T * scenes.starts.shape[1] * len(modes)
+        for k in args.devices:
+            devs = jax.local_devices()[:k]
+            shacc_jax.evaluate_on_devices(scenes, modes, devs)  # compile and warm up
+            times = []
+            for _ in range(args.repeat):
+                t = time.perf_counter()
+                shacc_jax.evaluate_on_devices(scenes, modes, devs)
+                times.append(time.perf_counter() - t)
+            med = statistics.median(times)
+            print(json.dumps({"devices": [str(d) for d in devs], "scenes": S,
+                              "rollouts": rollouts, "wall_s_median": med,
+                              "rollouts_per_s": rollouts / med}), flush=True)
 
 
 def cmd_reference(args) -> None:
@@ -148,6 +195,10 @@ def main() -> None:
     r.add_argument("--block", type=int, default=None)
     r.add_argument("--chunk", type=int, default=16)
     r.add_argument("--markley-unroll", type=int, default=None)
+    r.add_argument("--grid", type=int, nargs=2, metavar=("NY", "NZ"),
+                   help="replace the baked 6 x 6 start grid")
+    r.add_argument("--devices", type=int, nargs="+",
+                   help="time evaluate_on_devices with these device counts")
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     f = sub.add_parser("reference")

@@ -204,3 +204,42 @@ def evaluate(scenes, modes=MODES, block_size: int | None = None) -> Evaluation:
     if block < 1:
         raise ValueError(f"block_size must be >= 1, got {block}")
     return _evaluate(scenes, _check_modes(modes), block)
+
+
+def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:
+    """:func:`evaluate` spread over several devices (default: every local one), returned
+    as NumPy arrays. The scenes are split into equal parts (the last padded by
+    repeating a scene), each part runs on its device from its own host thread, and the
+    results are joined in order. One thread per device because the tracking's while
+    loops wait on the host at every iteration: dispatched from one thread, the devices
+    took turns (measured on two H200s: 0.74 s against 0.57 s for one device). Integer
+    results equal a single-device evaluation's; floats agree to rounding."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    devices = list(devices or jax.local_devices())
+    if not isinstance(scenes, Scenes):
+        scenes = Scenes.from_bake(scenes)
+    S = scenes.task_mask.shape[0]
+    host = jax.tree.map(np.asarray, scenes)
+    if len(devices) == 1 or S == 1:
+        return _evaluate_on(devices[0], host, modes)
+    per = -(-S // len(devices))
+    pad = per * len(devices) - S
+    if pad:
+        host = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), host)
+    parts = [jax.tree.map(lambda a, k=k: a[k * per:(k + 1) * per], host)
+             for k in range(len(devices))]
+    with ThreadPoolExecutor(len(devices)) as pool:
+        outs = list(pool.map(lambda kp: _evaluate_on(devices[kp[0]], kp[1], modes),
+                             enumerate(parts)))
+    joined = jax.tree.map(lambda *xs: np.concatenate(xs), *outs)
+    return jax.tree.map(lambda a: a[:S], joined)
+
+
+def _evaluate_on(device, host_scenes: Scenes, modes) -> Evaluation:
+    import numpy as np
+
+    part = Scenes(*jax.device_put(tuple(host_scenes), device))
+    return jax.tree.map(np.asarray, evaluate(part, modes))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import multiprocessing
 import os
 import pickle
@@ -106,28 +105,6 @@ def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
     per_scene = BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * \
         len(cfg.modes) * len(jax.local_devices())
     return max(1, min(cfg.chunk, int(0.5 * free // per_scene)))
-
-
-def evaluate_sharded(baked, modes):
-    """Evaluate on every local device: the scenes are split in equal parts (the last
-    padded by repeating a scene), each part dispatched to its device; JAX runs them
-    concurrently and the results are joined in order."""
-    devices = jax.local_devices()
-    S = baked.n_scenes
-    if len(devices) == 1 or S == 1:
-        return jax.tree.map(np.asarray, shacc_jax.evaluate(baked, modes))
-    scenes = shacc_jax.Scenes.from_bake(baked)
-    per = math.ceil(S / len(devices))
-    pad = per * len(devices) - S
-    if pad:
-        scenes = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), scenes)
-    outs = []
-    for k, dev in enumerate(devices):
-        part = jax.tree.map(lambda a, k=k, dev=dev: jax.device_put(a[k * per:(k + 1) * per], dev),
-                            scenes)
-        outs.append(shacc_jax.evaluate(part, modes))
-    joined = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs]), *outs)
-    return jax.tree.map(lambda a: a[:S], joined)
 
 
 def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, ...]:
@@ -235,7 +212,7 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
             computed += len(got) - hits
             # One task count for every chunk, so chunks of a point share one compilation.
             baked = bake(results, max_tasks)
-            ev = evaluate_sharded(baked, cfg.modes)
+            ev = shacc_jax.evaluate_on_devices(baked, cfg.modes)
             scenes_df, rollouts_df = _tables(cfg, c, results, ev)
             _write_parquet(parts / f"rollouts-{c.index:06d}.parquet", rollouts_df)
             _write_parquet(parts / f"scenes-{c.index:06d}.parquet", scenes_df)

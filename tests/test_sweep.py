@@ -164,18 +164,17 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
     assert not list(out.rglob("*.tmp"))
 
 
-def test_sharding_over_two_cpu_devices(shipped_bake, tmp_path):
+def test_evaluation_spread_over_two_cpu_devices(shipped_bake, tmp_path):
     np.savez(tmp_path / "b.npz", **shipped_bake.arrays())
     script = f"""
 import numpy as np, jax
 from types import SimpleNamespace
 import shacc_jax
-from sweeps.runner import evaluate_sharded
 assert len(jax.local_devices()) == 2, jax.local_devices()
 d = dict(np.load({str(tmp_path / 'b.npz')!r}))
 b = SimpleNamespace(**d, n_scenes=d["task_mask"].shape[0])
 one = jax.tree.map(np.asarray, shacc_jax.evaluate(b))
-two = evaluate_sharded(b, shacc_jax.MODES)
+two = shacc_jax.evaluate_on_devices(b, shacc_jax.MODES)
 for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(two)):
     if x.dtype.kind == "f":  # float32: another batch shape may round differently
         np.testing.assert_allclose(x, y, atol=5e-3, equal_nan=True)
