@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE ?= geometry_precompute/scenes/09_mug_behind_two.toml
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean notebooks
 
 $(BIN)/shacc: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -24,3 +24,8 @@ bench: $(BIN)/shacc
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
+
+# Executed .ipynb copies of the notebooks (git-ignored) and the README's pictures.
+notebooks: $(BIN)/shacc
+	mkdir -p docs/notebooks
+	SHACC_FIGURES=$(CURDIR)/docs/notebooks $(BIN)/python -m sweeps.notebook_runner --write-ipynb

@@ -1,14 +1,12 @@
 """Figures: the paper's Fig. 6 (correlations and per-category means) and Fig. 7
-(success fields), and top-down scene views. Plain matplotlib on the Agg backend;
-every function returns the Figure and can save it."""
+(success fields), top-down scene views and sweep plots. Plain matplotlib (its
+default backend: Agg on a machine without a display, inline in a notebook); every
+function returns the Figure and can save it."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap
@@ -159,3 +157,133 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True):
         fig.tight_layout()
         _save(fig, path)
     return fig
+
+
+def space_shadows_yz(shapes, sections: int = 32) -> list[np.ndarray]:
+    """Each space's outline seen from the start plane (its projection onto y-z): the
+    convex hull of its mesh vertices, as closed polylines."""
+    from geometry_precompute.meshes import shape_trimesh
+
+    out = []
+    for s in shapes:
+        pts = shape_trimesh(s, sections).vertices[:, 1:]
+        ring = pts[ConvexHull(pts).vertices]
+        out.append(np.vstack([ring, ring[:1]]))
+    return out
+
+
+def success_fields_with_spaces(outcome: np.ndarray, delta_r: np.ndarray, grid, y_range,
+                               z_range, result, modes: Sequence[str], path=None):
+    """Fig. 7 with more: per task (columns) the outcome field of each mode (rows, outcome
+    kinds coloured), the initial (red) and optimised (blue) spaces seen from the start
+    plane, and a last row with ShaCC's delta_R field over its successes."""
+    ny, nz = grid
+    M, _, T = outcome.shape
+    fig, axes = plt.subplots(M + 1, T, figsize=(3.0 * T, 2.6 * (M + 1)), squeeze=False)
+    cmap = ListedColormap(OUTCOME_COLORS)
+    extent = (y_range[0], y_range[1], z_range[0], z_range[1])
+    shadows_init = space_shadows_yz(result.shapes_init)
+    shadows_opt = space_shadows_yz(result.shapes_opt)
+    names = result.task_ids
+    for t in range(T):
+        for m in range(M):
+            ax = axes[m, t]
+            ax.imshow(outcome[m, :, t].reshape(ny, nz).T, origin="lower", cmap=cmap,
+                      vmin=-0.5, vmax=4.5, extent=extent, aspect="auto")
+            rate = float(np.mean(outcome[m, :, t] == 0))
+            ax.set_title(f"{modes[m]}: {names[t]} ({100 * rate:.0f} %)", fontsize=8)
+        ax = axes[M, t]
+        im = ax.imshow(delta_r[:, t].reshape(ny, nz).T, origin="lower", cmap="viridis",
+                       vmin=0.0, vmax=np.pi, extent=extent, aspect="auto")
+        ax.set_title(f"shacc delta_R: {names[t]}", fontsize=8)
+        for m in range(M + 1):
+            ax = axes[m, t]
+            for ring in shadows_init:
+                ax.plot(ring[:, 0], ring[:, 1], color="red", lw=0.6, alpha=0.7)
+            for ring in shadows_opt:
+                ax.plot(ring[:, 0], ring[:, 1], color="blue", lw=0.6, alpha=0.7)
+            ax.set_xlim(extent[0], extent[1])
+            ax.set_ylim(extent[2], extent[3])
+            ax.tick_params(labelsize=7)
+    fig.colorbar(im, ax=axes[M, :].tolist(), shrink=0.8, label="delta_R (rad)")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in OUTCOME_COLORS[:4]]
+    fig.legend(handles, ["success", "wrong", "ambiguous", "timeout"], loc="upper center",
+               ncol=4, fontsize=8)
+    return _save(fig, path)
+
+
+def scene_gallery(results, columns: int = 4, path=None):
+    """Top-down views of several scenes (initial red, optimised blue, clusters)."""
+    rows = -(-len(results) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.3 * columns, 3.4 * rows), squeeze=False)
+    for ax, r in zip(axes.ravel(), results, strict=False):
+        scene_top_view(r, ax=ax)
+    for ax in axes.ravel()[len(results):]:
+        ax.axis("off")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _ci_by_group(df, by: str, column: str, n_resamples: int, seed: int) -> list[dict]:
+    from .stats import mean_ci
+
+    out = []
+    for value, g in df.groupby(by, sort=True):
+        out.append({"value": value, **mean_ci(g[column].to_numpy(), n_resamples, seed)})
+    return out
+
+
+def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=None,
+                n_resamples: int = 2000, seed: int = 0):
+    """``metric`` ("success" or "delta_R_mean") against one swept setting, per mode,
+    mean over scenes with bootstrap CIs. ``axis`` is a setting name; the table's
+    column is ``set.<axis>``."""
+    col = f"set.{axis}"
+    df = scenes_df.copy()
+    df["_x"] = df[col].map(lambda v: float(v) if _is_number(v) else v)
+    fig, ax = plt.subplots(figsize=(4.8, 3.4))
+    for mode in modes:
+        pts = _ci_by_group(df, "_x", f"{mode}.{metric}", n_resamples, seed)
+        xs = [p["value"] for p in pts]
+        ms = np.array([np.nan if p["mean"] is None else p["mean"] for p in pts])
+        lo = np.array([m if p["ci"] is None else p["ci"][0] for p, m in zip(pts, ms, strict=True)])
+        hi = np.array([m if p["ci"] is None else p["ci"][1] for p, m in zip(pts, ms, strict=True)])
+        ax.errorbar(xs, ms, yerr=[ms - lo, hi - ms], marker="o", capsize=3, label=mode,
+                    color=MODE_COLORS.get(mode))
+    ax.set_xlabel(axis)
+    ax.set_ylabel(metric)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, path=None):
+    """Mean ``metric`` of ``mode`` over scenes, for a two-axis sweep."""
+    df = scenes_df.copy()
+    for a in (axis_x, axis_y):
+        df[a] = df[f"set.{a}"].map(lambda v: float(v) if _is_number(v) else v)
+    table = df.pivot_table(index=axis_y, columns=axis_x, values=f"{mode}.{metric}",
+                           aggfunc="mean")
+    fig, ax = plt.subplots(figsize=(4.8, 3.8))
+    im = ax.imshow(table.to_numpy(), origin="lower", cmap="viridis", aspect="auto")
+    ax.set_xticks(range(table.shape[1]), [f"{v:g}" if _is_number(v) else str(v)
+                                          for v in table.columns])
+    ax.set_yticks(range(table.shape[0]), [f"{v:g}" if _is_number(v) else str(v)
+                                          for v in table.index])
+    for (i, j), v in np.ndenumerate(table.to_numpy()):
+        ax.text(j, i, f"{v:.2f}", ha="center", va="center", color="w", fontsize=8)
+    ax.set_xlabel(axis_x)
+    ax.set_ylabel(axis_y)
+    ax.set_title(f"{mode}: {metric}")
+    fig.colorbar(im, ax=ax)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _is_number(v) -> bool:
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return False
+    return True
