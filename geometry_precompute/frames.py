@@ -1,7 +1,7 @@
 """Frames and quaternions on the CPU side (SPEC section 2), in float64.
 
-Quaternions are (w, x, y, z). scipy's Rotation uses (x, y, z, w): every
-conversion goes through :func:`quat_from_matrix` / :func:`matrix_from_quat`.
+Quaternions are (w, x, y, z). scipy's Rotation uses (x, y, z, w): conversions from
+matrices go through :func:`quat_from_matrix`; ``shapes.rotation_matrix`` goes back.
 """
 
 from __future__ import annotations
@@ -27,11 +27,6 @@ def quat_from_matrix(m) -> np.ndarray:
     q = np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
     # A canonical sign (w >= 0) keeps baked arrays and JSON output deterministic.
     return np.where(q[..., :1] < 0, -q, q)
-
-
-def matrix_from_quat(q) -> np.ndarray:
-    q = np.asarray(q, dtype=np.float64)
-    return Rotation.from_quat(np.concatenate([q[..., 1:], q[..., :1]], axis=-1)).as_matrix()
 
 
 def yaw_matrix(yaw: float) -> np.ndarray:
