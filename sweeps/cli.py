@@ -16,6 +16,7 @@ from geometry_precompute import InputError
 from .evaluate_cmd import add_evaluate
 from .output import precompute_json, write_json
 from .pipeline import load_and_precompute
+from .render import add_render
 from .reproduce import add_reproduce
 from .runner import add_sweep
 
@@ -73,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_evaluate(sub)
     add_reproduce(sub)
     add_sweep(sub)
+    add_render(sub)
     return p
 
 

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import settings
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+os.environ.setdefault("MUJOCO_GL", "egl")  # before anything imports mujoco
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
 
 settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)

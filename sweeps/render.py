@@ -1,0 +1,138 @@
+"""``shacc export-mjcf`` and ``shacc render``: a scene as MJCF, and a picture of it.
+
+The picture is MuJoCo's offscreen render of the exported MJCF (spaces translucent:
+initial red, optimised blue) beside the top-down matplotlib view, composed to exactly
+``--width`` x ``--height`` pixels. MuJoCo renders through EGL; the command sets
+``MUJOCO_GL=egl`` when it is unset, which works on CPU machines with Mesa's EGL.
+``--path START TASK`` draws one rollout of ``--mode`` in both views: the straight
+segment from the start to where it activated (or stopped).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+# MuJoCo picks its GL backend when it is first imported: choose EGL before that.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np
+
+from geometry_precompute import InputError
+from geometry_precompute.mjcf import scene_to_mjcf
+
+from .output import write_atomic
+from .pipeline import evaluate_results, load_and_precompute
+
+SPACES_FOR_MODE = {"baseline": "init", "shrinking": "both", "shacc": "both"}
+
+
+def render_array(result, width: int, height: int, spaces: str = "both",
+                 path: np.ndarray | None = None) -> np.ndarray:
+    """(height, width, 3) uint8 image of the scene from the front-left, above."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(scene_to_mjcf(result, spaces=spaces))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pos = np.array([o.position for o in result.scene.objects])
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = pos.mean(axis=0) + np.array([-0.15, 0.0, 0.05])
+    cam.distance = 1.5
+    cam.azimuth = 25.0
+    cam.elevation = -32.0
+    option = mujoco.MjvOption()
+    option.geomgroup[:3] = 1
+    with mujoco.Renderer(model, height, width) as renderer:
+        renderer.update_scene(data, cam, option)
+        if path is not None:
+            scn = renderer.scene
+            g = scn.geoms[scn.ngeom]
+            mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3),
+                                np.eye(3).ravel(), np.array([0.1, 0.8, 0.1, 1.0], np.float32))
+            mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_CAPSULE, 0.006,
+                                 np.asarray(path[0], float), np.asarray(path[1], float))
+            scn.ngeom += 1
+        return renderer.render().copy()
+
+
+def top_view_array(result, width: int, height: int, path=None) -> np.ndarray:
+    import matplotlib.pyplot as plt
+
+    from .plots import scene_top_view
+
+    dpi = 100
+    fig, ax = plt.subplots(figsize=(width / dpi, height / dpi), dpi=dpi)
+    scene_top_view(result, ax=ax)
+    if path is not None:
+        ax.plot([path[0][0], path[1][0]], [path[0][1], path[1][1]], color="green", lw=2)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    buf.seek(0)
+    img = plt.imread(buf)[..., :3]
+    out = np.ones((height, width, 3))
+    h, w = min(height, img.shape[0]), min(width, img.shape[1])
+    out[:h, :w] = img[:h, :w]
+    return (out * 255).astype(np.uint8)
+
+
+def rollout_path(result, mode: str, start: int, task: int) -> np.ndarray:
+    ev = evaluate_results([result], (mode,))
+    n_starts = ev.baked.n_starts
+    if not (0 <= start < n_starts and 0 <= task < len(result.spaces)):
+        raise InputError("<--path>", "START TASK", f"need 0 <= START < {n_starts} and "
+                         f"0 <= TASK < {len(result.spaces)}")
+    p0 = ev.baked.starts[0, start, :3]
+    p1 = ev.evaluation.rollouts.point[0, 0, start, task]
+    return np.stack([p0, p1])
+
+
+def render_scene(result, out: Path, width: int = 1280, height: int = 560,
+                 mode: str = "shacc", path_spec: tuple[int, int] | None = None) -> None:
+    path = rollout_path(result, mode, *path_spec) if path_spec else None
+    left = render_array(result, width // 2, height, SPACES_FOR_MODE[mode], path)
+    right = top_view_array(result, width - width // 2, height, path)
+    image = np.concatenate([left, right], axis=1)
+    import matplotlib.image as mpimg
+
+    buf = io.BytesIO()
+    mpimg.imsave(buf, image, format="png")
+    write_atomic(out, buf.getvalue())
+
+
+def cmd_export(args) -> int:
+    r = load_and_precompute(args.scene, args.set)
+    write_atomic(args.out, scene_to_mjcf(r).encode())
+    print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    if args.width < 64 or args.height < 64:
+        raise InputError("<arguments>", "--width/--height", "must be at least 64 pixels")
+    r = load_and_precompute(args.scene, args.set)
+    render_scene(r, Path(args.out), args.width, args.height, args.mode,
+                 tuple(args.path) if args.path else None)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def add_render(sub) -> None:
+    e = sub.add_parser("export-mjcf", help="write a scene as MJCF (loads in MuJoCo)")
+    e.add_argument("scene")
+    e.add_argument("out")
+    e.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    e.set_defaults(func=cmd_export)
+    r = sub.add_parser("render", help="3-D MuJoCo picture beside the top-down view")
+    r.add_argument("scene")
+    r.add_argument("--out", required=True, help="PNG file")
+    r.add_argument("--mode", default="shacc", choices=list(SPACES_FOR_MODE))
+    r.add_argument("--width", type=int, default=1280)
+    r.add_argument("--height", type=int, default=560)
+    r.add_argument("--path", type=int, nargs=2, metavar=("START", "TASK"),
+                   help="draw one rollout of --mode")
+    r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    r.set_defaults(func=cmd_render)
