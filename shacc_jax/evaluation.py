@@ -93,7 +93,11 @@ def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, ch
                               x["grow"])
 
     k_enter, k_last = jax.vmap(window)(s_idx, flat_path, act.step.reshape(L))
-    length = jnp.maximum(k_last - k_enter + 1.0, 0.0)
+    # Padded target tasks get an empty window: their outcome is INVALID anyway, and in a
+    # batch of 5- to 10-task scenes padded to 10 they are up to half of the lanes.
+    t_idx = jnp.broadcast_to(jnp.arange(T)[None, None, :], (S, N, T)).reshape(L)
+    real = scenes.task_mask[s_idx, t_idx]
+    length = jnp.where(real, jnp.maximum(k_last - k_enter + 1.0, 0.0), 0.0)
     B = min(block, L)
     W = chunk
     n_blocks = -(-L // B)

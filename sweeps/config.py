@@ -167,10 +167,10 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     if not points:
         points = [{}]
     cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir)
-    cfg.scenes()  # scene files are loaded (and validated) before any work starts
+    scenes = cfg.scenes()  # scene files are loaded (and validated) before any work starts
     for i, p in enumerate(points):
-        for s in cfg.scenes()[:1]:
-            s.settings(DEFAULTS, p)  # a point against a scene's own [settings]
+        for s in scenes:
+            s.settings(DEFAULTS, p)  # a point against each scene's own [settings]
         if p.get("collision", "off") != "off":
             raise InputError(src, f"points[{i}].collision",
                              "'mjx' collision checking is not available in this version")
