@@ -25,9 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt", "quat_opt",
-          "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis", "starts", "dt",
-          "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest")
+# The bake's fields as the JAX side reads them (importing geometry_precompute here would
+# need the mesh libraries, which the GPU machine does not have).
+from shacc_jax.types import Scenes
+
+FIELDS = Scenes._fields
 
 
 def _precompute_one(seed: int):
@@ -54,17 +56,22 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
-def _load(path: str, n: int):
+def _load(path: str, n: int, collision: bool = False):
     import jax.numpy as jnp
 
     from shacc_jax.types import Scenes
 
     data = np.load(path)
+    missing = [k for k in FIELDS if k not in data]
+    if missing:
+        raise SystemExit(f"{path}: bake lacks {missing}; bake it again with this version")
     total = data["task_mask"].shape[0]
     reps = -(-n // total)
     arrays = {}
     for k in FIELDS:
         a = data[k]
+        if k == "collision":
+            a = np.full_like(a, collision)
         a = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
         arrays[k] = jnp.asarray(a)
     return Scenes(**arrays)
@@ -105,7 +112,7 @@ def cmd_run(args) -> None:
     if args.devices:
         return _run_devices(args, modes)
     for n in args.sizes:
-        scenes = _load(args.bake, n)
+        scenes = _load(args.bake, n, args.collision)
         if args.grid:
             scenes = _regrid(scenes, *args.grid)
         S, T = scenes.task_mask.shape
@@ -114,7 +121,10 @@ def cmd_run(args) -> None:
         t0 = time.perf_counter()
         from shacc_jax.evaluation import default_block_size
         block = args.block or default_block_size()
-        compiled = _evaluate.lower(scenes, modes, block, args.chunk).compile()
+        collide = args.collision
+        boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == 1)).any())
+        lowered = _evaluate.lower(scenes, modes, block, args.chunk, collide, boxes)
+        compiled = lowered.compile()
         t1 = time.perf_counter()
         jax.block_until_ready(compiled(scenes))  # warm-up
         times = []
@@ -125,7 +135,8 @@ def cmd_run(args) -> None:
         med = statistics.median(times)
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
-               "chunk": args.chunk, "markley_unroll": args.markley_unroll,
+               "chunk": args.chunk, "collision": args.collision,
+               "markley_unroll": args.markley_unroll,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
@@ -199,6 +210,8 @@ def main() -> None:
                    help="replace the baked 6 x 6 start grid")
     r.add_argument("--devices", type=int, nargs="+",
                    help="time evaluate_on_devices with these device counts")
+    r.add_argument("--collision", action="store_true",
+                   help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     f = sub.add_parser("reference")

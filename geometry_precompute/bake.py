@@ -25,11 +25,22 @@ orient_quat         (S, T, 4)   fixed orientation; for point-to-axis the
                                 orientation used on the axis itself
 orient_axis         (S, T, 2)   (x, y) of the vertical axis (point-to-axis)
 starts              (S, N, 7)   start poses [x, y, z, qw, qx, qy, qz]
+obj_mask            (S, O)      True for a real object (O: most objects)
+obj_kind            (S, O)      0 cylinder, 1 box
+obj_center          (S, O, 3)   the object body's centre, world
+obj_quat            (S, O, 4)   its rotation (w, x, y, z)
+obj_size            (S, O, 3)   MuJoCo geom size: cylinder [r, half height, 0],
+                                box half extents
 dt, v_max,          (S,)        rollout settings, one value per scene, so a
 omega_max,                      sweep can vary them without recompiling
 activation_tol,
 max_steps,
-ambiguity_nearest
+ambiguity_nearest,
+collision,                      True for collision = "mjx"
+gripper_finger_length,          the ``gripper.*`` settings
+gripper_finger_radius,
+gripper_opening,
+gripper_palm_radius
 ==================  ==========  ===============================================
 
 Metadata for people (names, task ids, C values) rides along in ``meta`` and
@@ -47,11 +58,16 @@ from .errors import InputError
 from .precompute import PrecomputeResult
 from .shapes import KIND_CODES
 from .starts import start_poses
+from .templates import object_body
 
 ARRAY_FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt",
                 "quat_opt", "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis",
-                "starts")
-PARAM_FIELDS = ("dt", "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest")
+                "starts", "obj_mask", "obj_kind", "obj_center", "obj_quat", "obj_size")
+PARAM_FIELDS = ("dt", "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest",
+                "collision", "gripper_finger_length", "gripper_finger_radius", "gripper_opening",
+                "gripper_palm_radius")
+GRIPPER_FIELDS = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",
+                  "gripper_palm_radius")
 _PAD_DIMS = (0.01, 0.01, 0.01)
 
 
@@ -70,12 +86,22 @@ class BakedScenes:
     orient_quat: np.ndarray
     orient_axis: np.ndarray
     starts: np.ndarray
+    obj_mask: np.ndarray
+    obj_kind: np.ndarray
+    obj_center: np.ndarray
+    obj_quat: np.ndarray
+    obj_size: np.ndarray
     dt: np.ndarray
     v_max: np.ndarray
     omega_max: np.ndarray
     activation_tol: np.ndarray
     max_steps: np.ndarray
     ambiguity_nearest: np.ndarray
+    collision: np.ndarray
+    gripper_finger_length: np.ndarray
+    gripper_finger_radius: np.ndarray
+    gripper_opening: np.ndarray
+    gripper_palm_radius: np.ndarray
     meta: dict = field(default_factory=dict, compare=False)
 
     @property
@@ -146,12 +172,28 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params = {k: np.zeros(S) for k in PARAM_FIELDS}
     params["max_steps"] = np.zeros(S, np.int32)
     params["ambiguity_nearest"] = np.zeros(S, bool)
+    params["collision"] = np.zeros(S, bool)
+    O = max(1, max(len(r.scene.objects) for r in results))
+    out["obj_mask"] = np.zeros((S, O), bool)
+    out["obj_kind"] = np.zeros((S, O), np.int32)
+    out["obj_center"] = np.zeros((S, O, 3))
+    out["obj_quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (S, O, 1))
+    out["obj_size"] = np.tile(_PAD_DIMS, (S, O, 1))
     for si, r in enumerate(results):
         s = r.settings
-        if s["collision"] != "off":
-            raise InputError(r.scene.source, "settings.collision",
-                             "'mjx' collision checking is not available in this version; "
-                             "use collision = \"off\"")
+        for oi, obj in enumerate(r.scene.objects):
+            body = object_body(obj)
+            out["obj_mask"][si, oi] = True
+            out["obj_center"][si, oi] = body.center
+            out["obj_quat"][si, oi] = body.quat
+            if body.kind == "box":
+                out["obj_kind"][si, oi] = 1
+                out["obj_size"][si, oi] = body.dims
+            else:
+                out["obj_size"][si, oi] = (body.dims[0], body.dims[1] / 2, 0.0)
+        params["collision"][si] = s["collision"] == "mjx"
+        for k in GRIPPER_FIELDS:
+            params[k][si] = s[k.replace("gripper_", "gripper.")]
         for ti, space in enumerate(r.spaces):
             out["task_mask"][si, ti] = True
             out["kind"][si, ti] = KIND_CODES[r.shapes_init[ti].kind]

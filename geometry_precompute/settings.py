@@ -66,6 +66,12 @@ _SPECS: list[SettingSpec] = [
     SettingSpec("seed", 0, "int", "starts", "must be >= 0", _nonneg),
     SettingSpec("collision", "off", "choice", "rollout", "must be one of off, mjx",
                 lambda x: True, ("off", "mjx")),
+    # The gripper of collision = "mjx" (SPEC section 12b): two finger capsules along the
+    # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
+    SettingSpec("gripper.finger_length", 0.05, "float", "rollout", "must be > 0", _pos),
+    SettingSpec("gripper.finger_radius", 0.008, "float", "rollout", "must be > 0", _pos),
+    SettingSpec("gripper.opening", 0.10, "float", "rollout", "must be > 0", _pos),
+    SettingSpec("gripper.palm_radius", 0.015, "float", "rollout", "must be > 0", _pos),
     SettingSpec("mesh_sections", 32, "int", "precompute", "must be >= 8", lambda x: x >= 8),
     SettingSpec("entropy_variant", "formula", "choice", "precompute",
                 "must be one of formula, reference_code", lambda x: True,

@@ -177,6 +177,19 @@ def rotate_along(r0: Float[Array, "4"], inside: Bool[Array, " W"], targets: Floa
     return r, jnp.sum(inside.astype(jnp.int32))
 
 
+def rotate_along_path(r0: Float[Array, "4"], inside: Bool[Array, " W"],
+                      targets: Float[Array, "W 4"], max_angle: Array
+                      ) -> tuple[Float[Array, "4"], Float[Array, "W 4"]]:
+    """:func:`rotate_along` that also returns R at each of the W samples, before that
+    sample's rotation: the gripper pose the collision check sees there."""
+
+    def step(r, x):
+        ok, target = x
+        return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), r
+
+    return jax.lax.scan(step, r0, (inside, targets))
+
+
 def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> Array:
     kind, q_fixed, axis = orient
     return task_orientation(kind[target], q_fixed[target], axis[target], p)

@@ -24,11 +24,13 @@ from functools import partial
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array
 
 from . import automaton as am
+from . import collision as col
 from .meta import meta_target
 from .metrics import scene_metrics
-from .types import INVALID, MODES, Evaluation, Rollouts, SceneMetrics, Scenes
+from .types import COLLISION, INVALID, MODES, Evaluation, Rollouts, SceneMetrics, Scenes
 
 
 def _check_modes(modes) -> tuple[str, ...]:
@@ -66,38 +68,80 @@ def _orient(sc: Scenes):
     return (sc.orient_kind, sc.orient_quat, sc.orient_axis)
 
 
-def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, chunk: int):
-    """Orientation tracking of every (scene, start, task) lane. Returns R (S, N, T, 4)
-    and the meta steps (S, N, T).
+def _collision_start(sc: Scenes, path: am.Path, max_steps: Array) -> Array:
+    """First sample at which the gripper's bounding sphere (about p) reaches an object's
+    bounding sphere; inf if none (or the scene's collision checking is off). A
+    penetration needs that, so the samples before it are skipped without loss."""
+    size = sc.obj_size
+    r_obj = jnp.where(sc.obj_kind == col.BOX, jnp.linalg.norm(size, axis=-1),
+                      jnp.hypot(size[:, 0], size[:, 1]))
+    reach = col.gripper_reach(sc.gripper()) + r_obj + 1e-3
+    rel = sc.obj_center - path.p0
+    b = rel @ path.u
+    disc = b * b - (jnp.sum(rel * rel, axis=-1) - reach * reach)
+    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+    inf = jnp.asarray(jnp.inf, b.dtype)
+    ok = sc.obj_mask & (disc >= 0) & sc.collision
+    lo, hi = jnp.where(ok, b - root, inf), jnp.where(ok, b + root, -inf)
+    return jnp.min(am.first_sample(lo, hi, jnp.zeros((), b.dtype), path, max_steps))
 
-    Lanes are sorted by meta-window length, longest first. Chunk c covers samples
+
+def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, chunk: int,
+                 track: bool, collide: bool, boxes: bool):
+    """Orientation tracking (``track``, the shacc mode) and gripper collision checks
+    (``collide``) over every (scene, start, task) lane. Returns R (S, N, T, 4), the meta
+    steps (S, N, T) and the first colliding sample (S, N, T; inf for none).
+
+    Each lane has a window of samples: the meta window (tracking) joined with the
+    samples from the first bounding-sphere contact to the activation sample (collision
+    checks). Lanes are sorted by window length, longest first. Chunk c covers samples
     c W .. c W + W - 1 of each window; the lanes still busy in chunk c are a prefix of
-    the sorted order and are processed in blocks of B lanes: the targets of all B x W
-    samples in one parallel pass, then a W-step scan of the rotation rule. Work is
-    proportional to the sum of the windows (rounded up to W), not to the longest."""
+    the sorted order and are processed in blocks of B lanes: the meta targets of all
+    B x W samples in one parallel pass, then a W-step scan of the rotation rule that
+    also emits R at each sample, then the collision checks of all B x W poses at once.
+    Work is proportional to the sum of the windows (rounded up to W), not to the
+    longest. A collision at sample k ends the lane: R stays as it was at k and the
+    rotations from k on are not counted (the step rule checks collisions before it
+    rotates)."""
     S, N, T = act.step.shape
     L = S * N * T
+    dtype = scenes.starts.dtype
     s_idx = jnp.broadcast_to(jnp.arange(S)[:, None, None], (S, N, T)).reshape(L)
     n_idx = jnp.broadcast_to(jnp.arange(N)[None, :, None], (S, N, T)).reshape(L)
+    t_idx = jnp.broadcast_to(jnp.arange(T)[None, None, :], (S, N, T)).reshape(L)
     flat_path = jax.tree.map(lambda a: a.reshape(L, *a.shape[3:]), path)
+    act_step = act.step.reshape(L)
+    inf = jnp.asarray(jnp.inf, dtype)
 
-    # Prepared once per scene, gathered per lane.
     prep_init = jax.vmap(lambda sc: sc.spaces("init"))(scenes)
     prep_opt = jax.vmap(lambda sc: sc.spaces("opt"))(scenes)
 
-    def window(s, p, k_act):
+    def windows(s, p, k_act):
         sc = jax.tree.map(lambda a: a[s], scenes)
         x = _numbers(sc)
-        init = jax.tree.map(lambda a: a[s], prep_init)
-        return am.meta_window(init, sc.task_mask, sc.cluster, p, k_act, x["max_steps"],
-                              x["grow"])
+        if track:
+            init = jax.tree.map(lambda a: a[s], prep_init)
+            m_from, m_to = am.meta_window(init, sc.task_mask, sc.cluster, p, k_act,
+                                          x["max_steps"], x["grow"])
+        else:
+            m_from, m_to = inf, -inf
+        if collide:
+            c_from = _collision_start(sc, p, x["max_steps"])
+            c_to = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
+        else:
+            c_from, c_to = inf, -inf
+        return m_from, m_to, c_from, c_to
 
-    k_enter, k_last = jax.vmap(window)(s_idx, flat_path, act.step.reshape(L))
+    m_from, m_to, c_from, c_to = jax.vmap(windows)(s_idx, flat_path, act_step)
     # Padded target tasks get an empty window: their outcome is INVALID anyway, and in a
     # batch of 5- to 10-task scenes padded to 10 they are up to half of the lanes.
-    t_idx = jnp.broadcast_to(jnp.arange(T)[None, None, :], (S, N, T)).reshape(L)
     real = scenes.task_mask[s_idx, t_idx]
-    length = jnp.where(real, jnp.maximum(k_last - k_enter + 1.0, 0.0), 0.0)
+    m_ok, c_ok = m_from <= m_to, c_from <= c_to
+    w_from = jnp.minimum(jnp.where(m_ok, m_from, inf), jnp.where(c_ok, c_from, inf))
+    w_to = jnp.maximum(jnp.where(m_ok, m_to, -inf), jnp.where(c_ok, c_to, -inf))
+    length = jnp.where(real & (m_ok | c_ok), w_to - w_from + 1.0, 0.0)
+    w_from = jnp.where(length > 0, w_from, 0.0)
+
     B = min(block, L)
     W = chunk
     n_blocks = -(-L // B)
@@ -107,7 +151,13 @@ def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, ch
     busy = jnp.concatenate([length[order[:L]], jnp.zeros(Lp - L, length.dtype)])
     r = scenes.starts[s_idx[order], n_idx[order], 3:]
     n = jnp.zeros(Lp, jnp.int32)
-    offsets = jnp.arange(W, dtype=length.dtype)
+    hit = jnp.full(Lp, inf)
+    offsets = jnp.arange(W, dtype=dtype)
+    if collide:
+        _, model, data = col.collision_model(scenes.obj_mask.shape[1], boxes)
+        objects = jax.vmap(lambda sc: col.object_geoms(
+            sc.obj_kind, sc.obj_center, sc.obj_quat, sc.obj_size, sc.obj_mask, boxes))(scenes)
+        gripper = scenes.gripper()
 
     def targets(i, k):
         """(in a meta region, R_M) at sample k of lane i."""
@@ -119,37 +169,83 @@ def _track_all(scenes: Scenes, path: am.Path, act: am.Activation, block: int, ch
         return meta_target(init, opt, sc.task_mask, sc.cluster, _orient(sc), p,
                            sc.activation_tol)
 
-    def run_block(c, b, r, n):
+    def penetrates(i, k, q):
+        s = s_idx[i]
+        p = am.sample(jax.tree.map(lambda a: a[i], flat_path), k)
+        obj = jax.tree.map(lambda a: a[s], objects)
+        return col.penetrates(model, data, obj, p, q, gripper[s])
+
+    def run_block(c, b, r, n, hit):
         lanes = jax.lax.dynamic_slice(order, (b * B,), (B,))
         left = jax.lax.dynamic_slice(busy, (b * B,), (B,))
-        k = k_enter[lanes][:, None] + c * W + offsets[None, :]
-        valid = (c * W + offsets)[None, :] < left[:, None]
-        inside, goal = jax.vmap(jax.vmap(targets, (None, 0)))(lanes, k)
-        angle = (scenes.omega_max * scenes.dt)[s_idx[lanes]]
         r_b = jax.lax.dynamic_slice(r, (b * B, 0), (B, 4))
-        r_b, n_b = jax.vmap(am.rotate_along)(r_b, inside & valid, goal, angle)
-        n_b = n_b.astype(n.dtype) + jax.lax.dynamic_slice(n, (b * B,), (B,))
+        n_b = jax.lax.dynamic_slice(n, (b * B,), (B,))
+        hit_b = jax.lax.dynamic_slice(hit, (b * B,), (B,))
+        k = w_from[lanes][:, None] + c * W + offsets[None, :]
+        valid = (c * W + offsets)[None, :] < left[:, None]
+        alive = ~jnp.isfinite(hit_b)
+        if track:
+            m_valid = valid & (k >= m_from[lanes][:, None]) & (k <= m_to[lanes][:, None])
+            inside, goal = jax.vmap(jax.vmap(targets, (None, 0)))(lanes, k)
+            angle = (scenes.omega_max * scenes.dt)[s_idx[lanes]]
+            turned = inside & m_valid
+            if collide:
+                r_end, r_at = jax.vmap(am.rotate_along_path)(r_b, turned, goal, angle)
+            else:
+                r_end, _ = jax.vmap(am.rotate_along)(r_b, turned, goal, angle)
+        else:
+            r_end = r_b
+            r_at = jnp.broadcast_to(r_b[:, None, :], (B, W, 4))
+            turned = jnp.zeros((B, W), bool)
+        if collide:
+            c_valid = valid & (k >= c_from[lanes][:, None]) & (k <= c_to[lanes][:, None])
+            pen = jax.vmap(jax.vmap(penetrates, (None, 0, 0)))(lanes, k, r_at) & c_valid
+            first = jnp.argmax(pen, axis=1)
+            hit_now = jnp.any(pen, axis=1) & alive
+            upto = jnp.where(hit_now, first, W)
+            r_end = jnp.where(hit_now[:, None], r_at[jnp.arange(B), first], r_end)
+            hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
+        else:
+            upto = jnp.full(B, W)
+        counted = turned & (offsets[None, :] < upto[:, None])
+        n_b = n_b + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(n.dtype)
+        r_b = jnp.where(alive[:, None], r_end, r_b)
         return (jax.lax.dynamic_update_slice(r, r_b, (b * B, 0)),
-                jax.lax.dynamic_update_slice(n, n_b, (b * B,)))
+                jax.lax.dynamic_update_slice(n, n_b, (b * B,)),
+                jax.lax.dynamic_update_slice(hit, hit_b, (b * B,)))
 
-    def run_chunk(c, r, n):
+    def run_chunk(c, state):
         # Lanes with more than c W samples left form a prefix of the sorted order.
         active = jnp.sum(busy > c * W)
         n_active_blocks = (active + B - 1) // B
 
         def body(carry):
-            b, r, n = carry
-            r, n = run_block(c, b, r, n)
-            return b + 1, r, n
+            b, state = carry
+            return b + 1, run_block(c, b, *state)
 
-        _, r, n = jax.lax.while_loop(lambda x: x[0] < n_active_blocks, body, (0, r, n))
-        return r, n
+        _, state = jax.lax.while_loop(lambda x: x[0] < n_active_blocks, body, (0, state))
+        return state
 
     n_chunks = jnp.ceil(jnp.max(length) / W).astype(jnp.int32)
-    _, r, n = jax.lax.while_loop(lambda x: x[0] < n_chunks,
-                                 lambda x: (x[0] + 1, *run_chunk(x[0], x[1], x[2])), (0, r, n))
+    _, (r, n, hit) = jax.lax.while_loop(lambda x: x[0] < n_chunks,
+                                        lambda x: (x[0] + 1, run_chunk(x[0], x[1])),
+                                        (0, (r, n, hit)))
     inv = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))
-    return r[inv].reshape(S, N, T, 4), n[inv].reshape(S, N, T)
+    return r[inv].reshape(S, N, T, 4), n[inv].reshape(S, N, T), hit[inv].reshape(S, N, T)
+
+
+def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
+    """SPEC section 9's ``collision`` outcome where the gripper penetrated an object at
+    sample ``hit`` (at or before the activation sample)."""
+    found = jnp.isfinite(hit)
+    k = jnp.where(found, hit, 0.0)
+    point = jax.vmap(jax.vmap(jax.vmap(am.sample)))(path, k)
+    return am.Outcome(
+        jnp.where(found, COLLISION, out.code),
+        jnp.where(found, -1, out.activated),
+        jnp.where(found, k.astype(out.step.dtype), out.step),
+        jnp.where(found[..., None], point, out.point),
+        jnp.where(found, jnp.minimum(k * path.step, path.length), out.path_length))
 
 
 def _assemble(sc: Scenes, out: am.Outcome, r, meta_steps) -> Rollouts:
@@ -160,9 +256,9 @@ def _assemble(sc: Scenes, out: am.Outcome, r, meta_steps) -> Rollouts:
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr)
 
 
-@partial(jax.jit, static_argnames=("modes", "block_size", "chunk"))
-def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int,
-              chunk: int = 16) -> Evaluation:
+@partial(jax.jit, static_argnames=("modes", "block_size", "chunk", "collide", "boxes"))
+def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int, chunk: int = 16,
+              collide: bool = False, boxes: bool = False) -> Evaluation:
     passes = {}
     if "baseline" in modes:
         passes["init"] = jax.vmap(lambda sc: _activation_pass(sc, "init"))(scenes)
@@ -175,8 +271,13 @@ def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int,
     per_mode = []
     for mode in modes:
         path, act, out = passes["init" if mode == "baseline" else "opt"]
-        if mode == "shacc":
-            r, meta_steps = _track_all(scenes, path, act, block_size, chunk)
+        track = mode == "shacc"
+        if track or collide:
+            # Collision checks get smaller blocks: each pose is a whole MJX collision call.
+            block = max(1, block_size // 8) if collide else block_size
+            r, meta_steps, hit = _sweep_lanes(scenes, path, act, block, chunk, track,
+                                              collide, boxes)
+            out = _collided(out, path, hit)
         else:
             r, meta_steps = r0, no_meta
         per_mode.append(jax.vmap(_assemble)(scenes, out, r, meta_steps))
@@ -207,7 +308,13 @@ def evaluate(scenes, modes=MODES, block_size: int | None = None) -> Evaluation:
     block = default_block_size() if block_size is None else int(block_size)
     if block < 1:
         raise ValueError(f"block_size must be >= 1, got {block}")
-    return _evaluate(scenes, _check_modes(modes), block)
+    import numpy as np
+
+    # Static layout: whether any scene checks collisions, and whether any has a box
+    # (the MJX model gets box slots only then).
+    collide = bool(np.asarray(scenes.collision).any())
+    boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == col.BOX)).any())
+    return _evaluate(scenes, _check_modes(modes), block, collide=collide, boxes=boxes)
 
 
 def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:

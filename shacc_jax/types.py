@@ -45,12 +45,22 @@ class Scenes(NamedTuple):
     orient_quat: Float[Array, "S T 4"]
     orient_axis: Float[Array, "S T 2"]
     starts: Float[Array, "S N 7"]
+    obj_mask: Bool[Array, "S O"]
+    obj_kind: Int[Array, "S O"]
+    obj_center: Float[Array, "S O 3"]
+    obj_quat: Float[Array, "S O 4"]
+    obj_size: Float[Array, "S O 3"]
     dt: Float[Array, " S"]
     v_max: Float[Array, " S"]
     omega_max: Float[Array, " S"]
     activation_tol: Float[Array, " S"]
     max_steps: Int[Array, " S"]
     ambiguity_nearest: Bool[Array, " S"]
+    collision: Bool[Array, " S"]
+    gripper_finger_length: Float[Array, " S"]
+    gripper_finger_radius: Float[Array, " S"]
+    gripper_opening: Float[Array, " S"]
+    gripper_palm_radius: Float[Array, " S"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None) -> Scenes:
@@ -68,6 +78,11 @@ class Scenes(NamedTuple):
                 a = a.astype(np.int32)
             out[name] = jnp.asarray(a)
         return cls(**out)
+
+    def gripper(self) -> Float[Array, "... 4"]:
+        """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
+        return jnp.stack([self.gripper_finger_length, self.gripper_finger_radius,
+                          self.gripper_opening, self.gripper_palm_radius], axis=-1)
 
     def raw_spaces(self, which: str) -> Spaces:
         return Spaces(self.kind, getattr(self, f"center_{which}"), getattr(self, f"quat_{which}"),

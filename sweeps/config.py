@@ -168,12 +168,9 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         points = [{}]
     cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir)
     scenes = cfg.scenes()  # scene files are loaded (and validated) before any work starts
-    for i, p in enumerate(points):
+    for p in points:
         for s in scenes:
             s.settings(DEFAULTS, p)  # a point against each scene's own [settings]
-        if p.get("collision", "off") != "off":
-            raise InputError(src, f"points[{i}].collision",
-                             "'mjx' collision checking is not available in this version")
     return cfg
 
 

@@ -26,12 +26,14 @@ def print_summary(ev, s: int = 0) -> None:
                           "  ".join("[" + ", ".join(ids[i] for i in c) + "]" for c in meta)))
     n_starts = ev.baked.n_starts
     print(f"rollouts per mode: {int(me.n_rollouts[s, 0])} ({n_starts} starts x {len(ids)} tasks)")
-    head = f"{'mode':<10} {'rate':>8} " + " ".join(f"{o:>9}" for o in OUTCOMES[:4]) + \
+    # The collision column only where collision checking is on.
+    k = 5 if r.settings["collision"] != "off" else 4
+    head = f"{'mode':<10} {'rate':>8} " + " ".join(f"{o:>9}" for o in OUTCOMES[:k]) + \
         f" {'mean dR (rad)':>14}"
     print(head)
     print("-" * len(head))
     for m, mode in enumerate(ev.modes):
-        counts = " ".join(f"{int(c):>9}" for c in me.outcome_counts[s, m, :4])
+        counts = " ".join(f"{int(c):>9}" for c in me.outcome_counts[s, m, :k])
         dr = me.delta_R_mean[s, m]
         dr_txt = "n/a" if dr != dr else f"{dr:.3f}"
         print(f"{mode:<10} {me.u_scene[s, m]:>8.3f} {counts} {dr_txt:>14}")

@@ -198,24 +198,39 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
         return summary
     t0 = time.perf_counter()
     n_rollouts = hits_total = computed = 0
+    # Where the time goes, summed over chunks (reported in the summary).
+    stage = dict.fromkeys(("precompute", "bake", "evaluate", "tables", "write"), 0.0)
+
+    def lap(name: str, since: float) -> float:
+        now = time.perf_counter()
+        stage[name] += now - since
+        return now
+
     ctx = multiprocessing.get_context("spawn")  # JAX threads make fork unsafe
     bar = tqdm(total=len(chunks), initial=len(chunks) - len(todo), unit="chunk",
                disable=not progress, file=sys.stdout, desc=cfg.name)
-    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+    n_workers = workers or os.cpu_count() or 1
+    with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
         for c in todo:
             point = cfg.points[c.point]
             args = [(scenes[i], point, str(cache)) for i in c.scenes]
-            got = list(pool.map(_precompute_cached, args))
+            t = time.perf_counter()
+            got = list(pool.map(_precompute_cached, args, chunksize=max(1, len(args) // 64)))
+            t = lap("precompute", t)
             results = [r for r, _ in got]
             hits = sum(hit for _, hit in got)
             hits_total += hits
             computed += len(got) - hits
             # One task count for every chunk, so chunks of a point share one compilation.
             baked = bake(results, max_tasks)
+            t = lap("bake", t)
             ev = shacc_jax.evaluate_on_devices(baked, cfg.modes)
+            t = lap("evaluate", t)
             scenes_df, rollouts_df = _tables(cfg, c, results, ev)
+            t = lap("tables", t)
             _write_parquet(parts / f"rollouts-{c.index:06d}.parquet", rollouts_df)
             _write_parquet(parts / f"scenes-{c.index:06d}.parquet", scenes_df)
+            lap("write", t)
             n_rollouts += len(rollouts_df)
             rate = n_rollouts / (time.perf_counter() - t0)
             bar.set_postfix(rollouts=n_rollouts, rate=f"{rate:.3g}/s", cache_hits=hits)
@@ -229,7 +244,9 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
         write_atomic(final, sink.getvalue().to_pybytes())
     summary.update({"status": "complete", "rollouts_this_run": n_rollouts,
                     "precompute_cache_hits": hits_total, "precomputed": computed,
-                    "seconds": time.perf_counter() - t0})
+                    "seconds": time.perf_counter() - t0,
+                    "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
+                    "precompute_workers": n_workers})
     return summary
 
 

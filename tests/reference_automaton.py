@@ -16,7 +16,8 @@ from scipy.spatial.transform import Rotation
 
 from geometry_precompute.frames import frame_from_approach
 
-OUTCOME_NAMES = ("success", "wrong", "ambiguous", "timeout")
+OUTCOME_NAMES = ("success", "wrong", "ambiguous", "timeout", "collision")
+PENETRATION = 1e-4  # m: deeper than this counts as a collision (as in shacc_jax.collision)
 
 
 TIE = 1e-6  # sdf values within a micrometre are a tie (lower task index wins)
@@ -92,6 +93,10 @@ class Space:
 # --- orientation -----------------------------------------------------------------------
 
 
+def _wxyz(r: Rotation) -> np.ndarray:
+    return np.roll(r.as_quat(), 1)
+
+
 def task_rotation(orient_kind, orient_quat, axis, p) -> Rotation:
     if orient_kind == 1:
         v = np.array([axis[0] - p[0], axis[1] - p[1], 0.0])
@@ -120,6 +125,57 @@ def angle_between(r1: Rotation, r2: Rotation) -> float:
     return 2.0 * np.arccos(min(1.0, abs(float(np.dot(q1, q2)))))
 
 
+# --- collisions: the gripper's capsules against the objects, with CPU MuJoCo ---------
+
+
+class Collider:
+    """CPU MuJoCo (``mj_geomDistance``) on a model of one scene's real objects and the
+    three gripper capsules, posed directly (no kinematics)."""
+
+    def __init__(self, baked, scene: int):
+        import mujoco
+
+        s = scene
+        self.length = float(baked.gripper_finger_length[s])
+        self.opening = float(baked.gripper_opening[s])
+        r_f, r_p = float(baked.gripper_finger_radius[s]), float(baked.gripper_palm_radius[s])
+        geoms = []
+        for o in np.flatnonzero(baked.obj_mask[s]):
+            kind = "box" if baked.obj_kind[s, o] == 1 else "cylinder"
+            size = baked.obj_size[s, o] if kind == "box" else baked.obj_size[s, o][:2]
+            fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
+            pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'
+            geoms.append(f'<geom type="{kind}" size="{fmt(size)}" {pose}/>')
+        xml = (f'<mujoco><worldbody>{"".join(geoms)}<body name="g"><freejoint/>'
+               f'<geom type="capsule" size="{r_f} {self.length / 2}"/>'
+               f'<geom type="capsule" size="{r_f} {self.length / 2}"/>'
+               f'<geom type="capsule" size="{r_p} {self.opening / 2}"/>'
+               f'</body></worldbody></mujoco>')
+        self.mujoco = mujoco
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_kinematics(self.model, self.data)  # places the object geoms
+        self.n_obj = len(geoms)
+
+    def deepest(self, p, r: Rotation) -> float:
+        R = r.as_matrix()
+        x, y, z = R[:, 0], R[:, 1], R[:, 2]
+        half = self.opening / 2
+        # fingers along z from the palm (z = -length) to p; the palm along y at z = -length
+        centres = [p + half * y - self.length / 2 * z, p - half * y - self.length / 2 * z,
+                   p - self.length * z]
+        palm = np.column_stack([x, -z, y])
+        g0 = self.n_obj
+        for k, (c, m) in enumerate(zip(centres, [R, R, palm], strict=True)):
+            self.data.geom_xpos[g0 + k] = c
+            self.data.geom_xmat[g0 + k] = m.ravel()
+        return min(self.mujoco.mj_geomDistance(self.model, self.data, o, g0 + k, 1.0, None)
+                   for o in range(self.n_obj) for k in range(3))
+
+    def penetrates(self, p, r: Rotation) -> bool:
+        return self.deepest(p, r) < -PENETRATION
+
+
 # --- the rollout -----------------------------------------------------------------------
 
 
@@ -132,6 +188,7 @@ class Result:
     delta_R: float
     meta_steps: int
     path_length: float
+    quat: np.ndarray  # R at the end (w, x, y, z)
 
 
 def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
@@ -157,11 +214,18 @@ def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
     p = start_pose[:3].astype(float).copy()
     r = _rot(start_pose[3:])
     travelled, meta_steps = 0.0, 0
+    collider = Collider(baked, scene) if bool(baked.collision[scene]) else None
 
     def check(p):
         sd = np.array([s.sdf(p) for s in active])
         return sd, np.flatnonzero(sd <= tau)
 
+    def collided(step):
+        return Result("collision", -1, step, p, np.nan, meta_steps, travelled, _wxyz(r))
+
+    # Collision checks come first: a skill never activates at a penetrating pose.
+    if collider is not None and collider.penetrates(p, r):
+        return collided(0)
     sd, act = check(p)
     step = 0
     while act.size == 0 and step < max_steps:
@@ -171,6 +235,8 @@ def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
         move = (c - p) * (min(1.0, v_max * dt / gap) if gap > 0 else 0.0)
         p = p + move
         travelled += float(np.linalg.norm(move))
+        if collider is not None and collider.penetrates(p, r):
+            return collided(step)
         sd, act = check(p)
         if act.size:
             break
@@ -186,7 +252,7 @@ def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
                 r = rotate_towards(r, rots.mean(weights=w), omega * dt)
                 meta_steps += 1
     if act.size == 0:
-        return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled)
+        return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled, _wxyz(r))
     smallest = min(sd[j] for j in act)
     nearest = int(min(j for j in act if sd[j] <= smallest + TIE))
     if nearest_rule:
@@ -196,4 +262,4 @@ def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
     else:
         outcome = "wrong"
     dr = angle_between(r, task_rotation(*orient[target], p)) if outcome == "success" else np.nan
-    return Result(outcome, nearest, step, p, dr, meta_steps, travelled)
+    return Result(outcome, nearest, step, p, dr, meta_steps, travelled, _wxyz(r))

@@ -14,6 +14,8 @@ def test_every_spec_name_present():
     names = {"shrink_step", "shrink_max_iter", "dt", "v_max", "omega_max", "max_steps",
              "activation_tol", "ambiguity", "start_grid", "start_plane_offset",
              "start_y_halfwidth", "start_z_range", "start_orientation", "seed", "collision",
+             "gripper.finger_length", "gripper.finger_radius", "gripper.opening",
+             "gripper.palm_radius",
              "mesh_sections", "entropy_variant", "bootstrap_resamples",
              "side_grasp.radius_init", "side_grasp.radius_margin", "side_grasp.height_margin",
              "handle_grasp.length_init", "handle_grasp.length_min",

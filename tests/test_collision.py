@@ -1,0 +1,199 @@
+"""collision = "mjx": MJX's collision pipeline against CPU MuJoCo, designed scenes with
+and without a collision on the straight path, the shacc rotation changing the outcome,
+and the whole evaluation against the NumPy reference with CPU MuJoCo collisions."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from reference_automaton import OUTCOME_NAMES, Collider, rollout
+from scipy.spatial.transform import Rotation
+from test_automaton import compare, reference_table, run
+
+import shacc_jax
+from geometry_precompute import bake, precompute
+from geometry_precompute.scene import scene_from_dict
+from shacc_jax import collision as col
+from shacc_jax.types import COLLISION, SUCCESS, Scenes
+
+MODES = {m: i for i, m in enumerate(shacc_jax.MODES)}
+
+
+def designed(obstacle_y: float, **settings):
+    """A mug 0.35 m behind a taskless box standing on the straight line from the
+    start pose to the mug's side-grasp space, or beside it (obstacle_y)."""
+    scene = scene_from_dict({
+        "name": "obstacle",
+        "settings": {"collision": "mjx", "start_orientation": "forward", "start_grid": [1, 1],
+                     "start_y_halfwidth": 0.0, "start_z_range": [0.08, 0.08], **settings},
+        "objects": [{"id": "mug", "kind": "mug", "position": [0.35, 0.0, 0.0]},
+                    {"id": "box", "kind": "box", "position": [0.1, obstacle_y, 0.0],
+                     "half_extents": [0.03, 0.08, 0.1]}],
+        "tasks": [{"id": "grasp", "object": "mug", "template": "side_grasp"}],
+    }, "<designed>")
+    return precompute(scene, scene.settings())
+
+
+def test_gripper_capsules_match_the_reference_layout():
+    baked = bake([designed(0.3)])
+    ref = Collider(baked, 0)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        p, r = rng.normal(size=3) * 0.1, Rotation.random(random_state=rng)
+        q = jnp.asarray(np.roll(r.as_quat(), 1), jnp.float32)
+        centres, mats, sizes = col.gripper_geoms(jnp.asarray(p, jnp.float32), q,
+                                                 Scenes.from_bake(baked).gripper()[0])
+        ref.deepest(p, r)  # poses the reference capsules
+        np.testing.assert_allclose(centres, ref.data.geom_xpos[ref.n_obj:], atol=1e-6)
+        np.testing.assert_allclose(np.abs(mats.reshape(3, 9)),  # the palm's axis sign is free
+                                   np.abs(ref.data.geom_xmat[ref.n_obj:]), atol=1e-6)
+        np.testing.assert_allclose(sizes, ref.model.geom_size[ref.n_obj:, :2], atol=1e-7)
+
+
+def test_mjx_penetrations_agree_with_cpu_mujoco():
+    """Random gripper poses among two cylinders and a yawed box. MJX approximates the
+    capsule-cylinder distance by a few gradient steps on the SDFs (and reports no
+    distance for separated capsule-box pairs), so penetration depths differ from CPU
+    MuJoCo's by up to centimetres; the decision penetrating or not agrees on all but a
+    few poses in a thousand once the reference is 2 mm from the boundary."""
+    scene = scene_from_dict({
+        "name": "poses",
+        "objects": [{"id": "a", "kind": "mug", "position": [0.0, 0.0, 0.0]},
+                    {"id": "b", "kind": "cup", "position": [0.15, 0.0, 0.0]},
+                    {"id": "c", "kind": "box", "position": [0.0, 0.2, 0.0], "yaw": 0.4,
+                     "half_extents": [0.05, 0.08, 0.04]}],
+        "tasks": [{"id": "t", "object": "a", "template": "side_grasp"}],
+    }, "<poses>")
+    baked = bake([precompute(scene, scene.settings())])
+    sc = Scenes.from_bake(baked)
+    _, model, data = col.collision_model(3, True)
+    objects = col.object_geoms(sc.obj_kind[0], sc.obj_center[0], sc.obj_quat[0],
+                               sc.obj_size[0], sc.obj_mask[0], True)
+    rng = np.random.default_rng(0)
+    n = 1500
+    P = rng.uniform([-0.1, -0.1, 0.0], [0.25, 0.3, 0.15], (n, 3))
+    R = Rotation.random(n, random_state=1)
+    Q = np.roll(R.as_quat(), 1, axis=1)
+    got = np.asarray(jax.jit(jax.vmap(lambda p, q: col.deepest(
+        model, data, objects, p, q, sc.gripper()[0])))(jnp.asarray(P, jnp.float32),
+                                                       jnp.asarray(Q, jnp.float32)))
+    ref = Collider(baked, 0)
+    want = np.array([ref.deepest(p, r) for p, r in zip(P, R, strict=True)])
+    clear = np.abs(want) > 2e-3
+    pen_got, pen_want = got < -col.PENETRATION_EPS, want < -col.PENETRATION_EPS
+    assert 0.2 < pen_want[clear].mean() < 0.8  # both kinds of pose are well represented
+    disagree = np.mean(pen_got[clear] != pen_want[clear])
+    assert disagree < 0.005, disagree
+    # Where both report no contact for a cylinder-only neighbourhood, MJX's distance is
+    # a real clearance: it is never below the true one by more than rounding.
+    sep = (got > 0) & (got < 0.5) & (want > 0)
+    assert sep.sum() > 100
+    assert np.all(got[sep] >= want[sep] - 1e-4)
+
+
+def test_designed_scene_collides_only_with_the_obstacle_on_the_path():
+    blocked, aside = designed(0.0), designed(0.3)
+    for result, expect in ((blocked, COLLISION), (aside, SUCCESS)):
+        b = bake([result])
+        ev = run(b)
+        assert (ev.rollouts.outcome[0, :, 0, 0] == expect).all(), ev.rollouts.outcome
+        for m, mode in enumerate(shacc_jax.MODES):
+            ref = rollout(b, 0, mode, 0, 0)
+            assert ref.outcome == ("collision" if expect == COLLISION else "success")
+            assert ref.step == ev.rollouts.step[0, m, 0, 0]
+    # With collision checking off, the blocked path is a success: the box has no task.
+    off = bake([precompute(blocked.scene, blocked.settings.with_overrides(
+        {"collision": "off"}))])
+    assert (run(off).rollouts.outcome[0, :, 0, 0] == SUCCESS).all()
+
+
+@pytest.fixture(scope="module")
+def colliding(shipped_results):
+    picks = [shipped_results[i] for i in (2, 8, 9)]  # tight row, mug behind two, cluster
+    rs = [precompute(r.scene, r.settings.with_overrides({"collision": "mjx"})) for r in picks]
+    b = bake(rs)
+    return b, run(b)
+
+
+def test_shacc_rotation_changes_the_collision_outcome(colliding):
+    """Shrinking and shacc walk the same straight paths; only shacc turns the gripper in
+    meta regions. On these cluttered scenes that turn saves rollouts from collisions
+    they have in shrinking (turning towards the target's grasp orientation lines the
+    fingers up with the gap); each changed case is confirmed by the reference."""
+    b, ev = colliding
+    out = ev.rollouts.outcome
+    shr, sha = out[:, MODES["shrinking"]], out[:, MODES["shacc"]]
+    turned_in = np.argwhere((sha == COLLISION) & (shr != COLLISION))
+    turned_out = np.argwhere((shr == COLLISION) & (sha != COLLISION))
+    assert len(turned_out) >= 5
+    for s, n, t in [*turned_in[:1], *turned_out[:3]]:
+        a, c = rollout(b, s, "shrinking", n, t), rollout(b, s, "shacc", n, t)
+        assert (a.outcome == "collision") != (c.outcome == "collision")
+        assert ev.rollouts.meta_steps[s, MODES["shacc"], n, t] > 0
+
+
+def test_collision_rollouts_agree_with_reference(colliding):
+    """Rollout by rollout against the NumPy Automaton with CPU MuJoCo collisions. MJX's
+    capsule-cylinder distance is a few gradient steps on the SDFs and comes out up to
+    about 8 mm too large near contact (never too small), so MJX can notice a collision
+    a step or three later than CPU MuJoCo, or miss a graze. Every difference must be
+    such a late detection, at a pose MJX puts within 1 cm of contact; everything else
+    agrees exactly (measured: 21 of 972 rollouts differ)."""
+    b, ev = colliding
+    ro = ev.rollouts
+    table = reference_table(b, [3, 3, 3])
+    sc = Scenes.from_bake(b)
+    _, model, data = col.collision_model(b.obj_mask.shape[1], False)
+    late = 0
+    agree = {}
+    for key, ref in table.items():
+        s = key[0]
+        got = (OUTCOME_NAMES[ro.outcome[key]], int(ro.step[key]))
+        if got == (ref.outcome, ref.step):
+            agree[key] = ref
+            continue
+        assert ref.outcome == "collision", (key, got, ref)
+        assert got[1] >= ref.step, (key, got, ref)
+        objects = col.object_geoms(sc.obj_kind[s], sc.obj_center[s], sc.obj_quat[s],
+                                   sc.obj_size[s], sc.obj_mask[s], False)
+        gap = col.deepest(model, data, objects, jnp.asarray(ref.point, jnp.float32),
+                          jnp.asarray(ref.quat, jnp.float32), sc.gripper()[s])
+        assert float(gap) < 0.01, (key, float(gap))
+        late += 1
+    assert late <= 0.04 * len(table), late
+    compare(ev, agree, dr_tol=5e-3)
+    assert (ro.outcome == COLLISION).sum() > 20
+
+
+def test_mixed_batch_and_no_recompile():
+    """Scenes with and without collision checking, and of different object counts, in
+    one batch: each scene's rollouts equal its own evaluation's. New object poses and
+    gripper sizes reuse the compiled computation."""
+    one, two = designed(0.0), designed(0.3, **{"gripper.opening": 0.14})
+    off = precompute(one.scene, one.settings.with_overrides({"collision": "off"}))
+    b = bake([one, two, off])
+    ev = run(b)
+    for s, r in enumerate((one, two, off)):
+        alone = run(bake([r], max_tasks=1))
+        np.testing.assert_array_equal(ev.rollouts.outcome[s], alone.rollouts.outcome[0])
+    assert ev.rollouts.outcome[0, 0, 0, 0] == COLLISION
+    assert ev.rollouts.outcome[2, 0, 0, 0] == SUCCESS
+    before = shacc_jax.evaluation._evaluate._cache_size()
+    moved = bake([designed(0.05), designed(-0.2, **{"gripper.finger_radius": 0.02}), off])
+    run(moved)
+    assert shacc_jax.evaluation._evaluate._cache_size() == before
+
+
+def test_importing_the_package_starts_no_jax_backend():
+    """The sweep's precompute workers import shacc_jax (through sweeps.runner) and must
+    never start a backend: on a GPU machine each would try to take most of the GPU's
+    memory. So no module of the package may create a JAX array at import time."""
+    import subprocess
+    import sys
+
+    code = ("import sweeps.runner, shacc_jax, shacc_jax.collision\n"
+            "from jax._src import xla_bridge\n"
+            "assert not xla_bridge._backends, xla_bridge._backends\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
