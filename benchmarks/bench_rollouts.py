@@ -147,10 +147,15 @@ def cmd_run(args) -> None:
 
 
 def _run_devices(args, modes) -> None:
-    """Wall time of evaluate_on_devices (results back on the host) with 1..K devices."""
+    """Wall time of evaluate_on_devices (one thread per device), or with --sharded of
+    evaluate_sharded (one jax.sharding program), results back on the host, with 1..K
+    devices."""
     import jax
 
     import shacc_jax
+    from shacc_jax.evaluation import evaluate_sharded
+
+    run = evaluate_sharded if args.sharded else shacc_jax.evaluate_on_devices
 
     for n in args.sizes:
         scenes = _load(args.bake, n)
@@ -158,14 +163,15 @@ def _run_devices(args, modes) -> None:
         rollouts = S * T * scenes.starts.shape[1] * len(modes)
         for k in args.devices:
             devs = jax.local_devices()[:k]
-            shacc_jax.evaluate_on_devices(scenes, modes, devs)  # compile and warm up
+            run(scenes, modes, devs)  # compile and warm up
             times = []
             for _ in range(args.repeat):
                 t = time.perf_counter()
-                shacc_jax.evaluate_on_devices(scenes, modes, devs)
+                run(scenes, modes, devs)
                 times.append(time.perf_counter() - t)
             med = statistics.median(times)
-            print(json.dumps({"devices": [str(d) for d in devs], "scenes": S,
+            print(json.dumps({"devices": [str(d) for d in devs], "sharded": args.sharded,
+                              "scenes": S,
                               "rollouts": rollouts, "wall_s_median": med,
                               "rollouts_per_s": rollouts / med}), flush=True)
 
@@ -210,6 +216,8 @@ def main() -> None:
                    help="replace the baked 6 x 6 start grid")
     r.add_argument("--devices", type=int, nargs="+",
                    help="time evaluate_on_devices with these device counts")
+    r.add_argument("--sharded", action="store_true",
+                   help="with --devices: evaluate_sharded instead of one thread per device")
     r.add_argument("--collision", action="store_true",
                    help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--json")

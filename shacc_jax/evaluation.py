@@ -349,6 +349,47 @@ def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:
     return jax.tree.map(lambda a: a[:S], joined)
 
 
+@partial(jax.jit, static_argnames=("modes", "block_size", "mesh", "collide", "boxes"))
+def _evaluate_sharded(scenes: Scenes, modes, block_size: int, mesh, collide: bool,
+                      boxes: bool) -> Evaluation:
+    from jax.sharding import PartitionSpec as P
+
+    def local(part: Scenes) -> Evaluation:
+        # Each device evaluates its own scenes: the lane sort and the while loops of the
+        # tracking are per device, with no communication.
+        return _evaluate.__wrapped__(part, modes, block_size, 16, collide, boxes)
+
+    return jax.shard_map(local, mesh=mesh, in_specs=P("scenes"), out_specs=P("scenes"),
+                         check_vma=False)(scenes)
+
+
+def evaluate_sharded(scenes, modes=MODES, devices=None) -> Evaluation:
+    """:func:`evaluate` as one program over several devices (default: every local one)
+    with ``jax.sharding``: the scenes axis is split over a one-axis mesh and
+    ``jax.shard_map`` runs the whole evaluation on each device's scenes. S is padded to
+    a multiple of the device count by repeating the last scene; the result (NumPy) has
+    the original S."""
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding
+    from jax.sharding import PartitionSpec as P
+
+    devices = list(devices or jax.local_devices())
+    if not isinstance(scenes, Scenes):
+        scenes = Scenes.from_bake(scenes)
+    host = jax.tree.map(np.asarray, scenes)
+    S = host.task_mask.shape[0]
+    pad = -S % len(devices)
+    if pad:
+        host = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), host)
+    mesh = Mesh(np.array(devices), ("scenes",))
+    sharded = jax.device_put(tuple(host), NamedSharding(mesh, P("scenes")))
+    collide = bool(host.collision.any())
+    boxes = collide and bool((host.obj_mask & (host.obj_kind == col.BOX)).any())
+    block = default_block_size()
+    out = _evaluate_sharded(Scenes(*sharded), _check_modes(modes), block, mesh, collide, boxes)
+    return jax.tree.map(lambda a: np.asarray(a)[:S], out)
+
+
 def _evaluate_on(device, host_scenes: Scenes, modes) -> Evaluation:
     import numpy as np
 

@@ -175,11 +175,13 @@ d = dict(np.load({str(tmp_path / 'b.npz')!r}))
 b = SimpleNamespace(**d, n_scenes=d["task_mask"].shape[0])
 one = jax.tree.map(np.asarray, shacc_jax.evaluate(b))
 two = shacc_jax.evaluate_on_devices(b, shacc_jax.MODES)
-for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(two)):
-    if x.dtype.kind == "f":  # float32: another batch shape may round differently
-        np.testing.assert_allclose(x, y, atol=5e-3, equal_nan=True)
-    else:
-        np.testing.assert_array_equal(x, y)
+mesh = shacc_jax.evaluate_sharded(b, shacc_jax.MODES)
+for other in (two, mesh):
+    for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(other)):
+        if x.dtype.kind == "f":  # float32: another batch shape may round differently
+            np.testing.assert_allclose(x, y, atol=5e-3, equal_nan=True)
+        else:
+            np.testing.assert_array_equal(x, y)
 print("ok", two.rollouts.outcome.shape)
 """
     env = {**os.environ, "JAX_PLATFORMS": "cpu",
