@@ -100,7 +100,7 @@ def cmd_run(args) -> None:
     import jax
 
     import shacc_jax
-    from shacc_jax.evaluation import _evaluate
+    from shacc_jax.evaluation import _collision_layout, _evaluate
 
     modes = tuple(args.modes)
     if args.markley_unroll is not None:
@@ -121,9 +121,7 @@ def cmd_run(args) -> None:
         t0 = time.perf_counter()
         from shacc_jax.evaluation import default_block_size
         block = args.block or default_block_size()
-        collide = args.collision
-        boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == 1)).any())
-        lowered = _evaluate.lower(scenes, modes, block, args.chunk, collide, boxes)
+        lowered = _evaluate.lower(scenes, modes, block, args.chunk, **_collision_layout(scenes))
         compiled = lowered.compile()
         t1 = time.perf_counter()
         jax.block_until_ready(compiled(scenes))  # warm-up

@@ -168,12 +168,7 @@ def rotate_along(r0: Float[Array, "4"], inside: Bool[Array, " W"], targets: Floa
     sample's R_M by at most ``max_angle`` where the sample is in a meta region. The
     targets do not depend on R, so they are computed for all samples beforehand (in
     parallel); only this scan is sequential."""
-
-    def step(r, x):
-        ok, target = x
-        return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), None
-
-    r, _ = jax.lax.scan(step, r0, (inside, targets))
+    r, _ = _rotation_scan(r0, inside, targets, max_angle, emit=False)
     return r, jnp.sum(inside.astype(jnp.int32))
 
 
@@ -182,10 +177,15 @@ def rotate_along_path(r0: Float[Array, "4"], inside: Bool[Array, " W"],
                       ) -> tuple[Float[Array, "4"], Float[Array, "W 4"]]:
     """:func:`rotate_along` that also returns R at each of the W samples, before that
     sample's rotation: the gripper pose the collision check sees there."""
+    return _rotation_scan(r0, inside, targets, max_angle, emit=True)
 
+
+def _rotation_scan(r0, inside, targets, max_angle, emit: bool):
+    # Without collisions nothing reads the per-sample R, so it is not emitted (on the GPU
+    # the tracking is most of the time, and the extra writes would cost).
     def step(r, x):
         ok, target = x
-        return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), r
+        return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), r if emit else None
 
     return jax.lax.scan(step, r0, (inside, targets))
 

@@ -308,13 +308,27 @@ def evaluate(scenes, modes=MODES, block_size: int | None = None) -> Evaluation:
     block = default_block_size() if block_size is None else int(block_size)
     if block < 1:
         raise ValueError(f"block_size must be >= 1, got {block}")
+    return _evaluate(scenes, _check_modes(modes), block, **_collision_layout(scenes))
+
+
+def _collision_layout(scenes: Scenes) -> dict:
+    """Static layout read on the host: whether any scene checks collisions, and whether
+    any has a box (the MJX model gets box slots only then)."""
     import numpy as np
 
-    # Static layout: whether any scene checks collisions, and whether any has a box
-    # (the MJX model gets box slots only then).
     collide = bool(np.asarray(scenes.collision).any())
     boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == col.BOX)).any())
-    return _evaluate(scenes, _check_modes(modes), block, collide=collide, boxes=boxes)
+    return {"collide": collide, "boxes": boxes}
+
+
+def _pad_scenes(host: Scenes, parts: int) -> Scenes:
+    """Host scenes padded to a multiple of ``parts`` by repeating the last scene."""
+    import numpy as np
+
+    pad = -host.task_mask.shape[0] % parts
+    if not pad:
+        return host
+    return jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), host)
 
 
 def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:
@@ -337,9 +351,7 @@ def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:
     if len(devices) == 1 or S == 1:
         return _evaluate_on(devices[0], host, modes)
     per = -(-S // len(devices))
-    pad = per * len(devices) - S
-    if pad:
-        host = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), host)
+    host = _pad_scenes(host, len(devices))
     parts = [jax.tree.map(lambda a, k=k: a[k * per:(k + 1) * per], host)
              for k in range(len(devices))]
     with ThreadPoolExecutor(len(devices)) as pool:
@@ -378,15 +390,11 @@ def evaluate_sharded(scenes, modes=MODES, devices=None) -> Evaluation:
         scenes = Scenes.from_bake(scenes)
     host = jax.tree.map(np.asarray, scenes)
     S = host.task_mask.shape[0]
-    pad = -S % len(devices)
-    if pad:
-        host = jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[-1:], pad, 0)]), host)
+    host = _pad_scenes(host, len(devices))
     mesh = Mesh(np.array(devices), ("scenes",))
     sharded = jax.device_put(tuple(host), NamedSharding(mesh, P("scenes")))
-    collide = bool(host.collision.any())
-    boxes = collide and bool((host.obj_mask & (host.obj_kind == col.BOX)).any())
-    block = default_block_size()
-    out = _evaluate_sharded(Scenes(*sharded), _check_modes(modes), block, mesh, collide, boxes)
+    out = _evaluate_sharded(Scenes(*sharded), _check_modes(modes), default_block_size(), mesh,
+                            **_collision_layout(host))
     return jax.tree.map(lambda a: np.asarray(a)[:S], out)
 
 
