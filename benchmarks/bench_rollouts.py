@@ -100,7 +100,7 @@ def cmd_run(args) -> None:
     import jax
 
     import shacc_jax
-    from shacc_jax.evaluation import _collision_layout, _evaluate
+    from shacc_jax.evaluation import _evaluate, static_layout
 
     modes = tuple(args.modes)
     if args.markley_unroll is not None:
@@ -121,7 +121,10 @@ def cmd_run(args) -> None:
         t0 = time.perf_counter()
         from shacc_jax.evaluation import default_block_size
         block = args.block or default_block_size()
-        lowered = _evaluate.lower(scenes, modes, block, args.chunk, **_collision_layout(scenes))
+        layout = static_layout(scenes)
+        if args.meta:
+            layout["meta"] = args.meta  # "general" on yaw-only scenes: the Markley path
+        lowered = _evaluate.lower(scenes, modes, block, args.chunk, **layout)
         compiled = lowered.compile()
         t1 = time.perf_counter()
         jax.block_until_ready(compiled(scenes))  # warm-up
@@ -134,7 +137,7 @@ def cmd_run(args) -> None:
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
                "chunk": args.chunk, "collision": args.collision,
-               "markley_unroll": args.markley_unroll,
+               "markley_unroll": args.markley_unroll, "meta": layout["meta"],
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
@@ -210,6 +213,8 @@ def main() -> None:
     r.add_argument("--block", type=int, default=None)
     r.add_argument("--chunk", type=int, default=16)
     r.add_argument("--markley-unroll", type=int, default=None)
+    r.add_argument("--meta", choices=["yaw", "general"], default=None,
+                   help="force the meta-target formula (default: what the scenes need)")
     r.add_argument("--grid", type=int, nargs=2, metavar=("NY", "NZ"),
                    help="replace the baked 6 x 6 start grid")
     r.add_argument("--devices", type=int, nargs="+",

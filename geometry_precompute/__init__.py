@@ -13,11 +13,19 @@ from .settings import DEFAULTS, SPECS, Settings
 
 
 def shipped_scene_paths() -> list[Path]:
-    """The manual scenes that ship with the package, in file-name order."""
+    """The manual scenes that ship with the package, in file-name order: the twelve of
+    the paper's experiment (``reproduce`` uses these), not the ``extra`` ones."""
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes").iterdir()
                   if str(p).endswith(".toml"))
 
 
+def extra_scene_paths() -> list[Path]:
+    """Scenes that ship beside the paper's twelve (``scenes/extra``), for cases those do
+    not cover: a cluster that mixes a top grasp with side grasps."""
+    return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes", "extra").iterdir()
+                  if str(p).endswith(".toml"))
+
+
 __all__ = ["DEFAULTS", "SPECS", "BakedScenes", "InputError", "PrecomputeResult", "Scene",
-           "Settings", "bake", "load_scene", "precompute", "random_scene", "save_scene",
-           "scene_from_dict", "shipped_scene_paths"]
+           "Settings", "bake", "extra_scene_paths", "load_scene", "precompute", "random_scene",
+           "save_scene", "scene_from_dict", "shipped_scene_paths"]

@@ -14,8 +14,10 @@ loop would run every lane to the batch's longest window, and on a GPU each
 loop iteration costs kernel launches. So the lanes of all scenes are sorted by
 window length, and the meta targets of a block of lanes x a chunk of samples
 are computed in one parallel pass before a short sequential scan applies the
-rate-limited rotation (see ``_track_all``; measured on CPU: 5x less work than
-one loop over all lanes).
+rate-limited rotation (see ``_sweep_lanes``; measured on CPU: 5x less work than
+one loop over all lanes). That pass works on (tasks, lanes, samples) arrays and
+takes the closed form of R_M where every cluster member's orientation space is a
+horizontal approach frame (``meta`` module docstring; docs/DECISIONS.md).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from jaxtyping import Array
 
 from . import automaton as am
 from . import collision as col
-from .meta import meta_target
+from . import shapes
+from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions, yaw_only
 from .metrics import scene_metrics
 from .types import COLLISION, INVALID, MODES, Evaluation, Rollouts, SceneMetrics, Scenes
 
@@ -87,7 +90,7 @@ def _collision_start(sc: Scenes, path: am.Path, max_steps: Array) -> Array:
 
 
 def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, chunk: int,
-                 track: bool, collide: bool, boxes: bool):
+                 track: bool, collide: bool, boxes: bool, meta: str = "general"):
     """Orientation tracking (``track``, the shacc mode) and gripper collision checks
     (``collide``) over every (scene, start, task) lane. Returns R (S, N, T, 4), the meta
     steps (S, N, T) and the first colliding sample (S, N, T; inf for none).
@@ -102,7 +105,12 @@ def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, 
     Work is proportional to the sum of the windows (rounded up to W), not to the
     longest. A collision at sample k ends the lane: R stays as it was at k and the
     rotations from k on are not counted (the step rule checks collisions before it
-    rotates)."""
+    rotates).
+
+    ``meta`` (static) says which meta-target formula the batch needs: ``"yaw"`` when
+    every scene's cluster members have horizontal approach frames (the closed form of
+    ``meta.meta_target_yaw``), ``"general"`` when none does (the Markley average), and
+    ``"both"``: then the lanes of each kind of scene get their own sweep."""
     S, N, T = act.step.shape
     L = S * N * T
     dtype = scenes.starts.dtype
@@ -142,32 +150,53 @@ def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, 
     length = jnp.where(real & (m_ok | c_ok), w_to - w_from + 1.0, 0.0)
     w_from = jnp.where(length > 0, w_from, 0.0)
 
-    B = min(block, L)
     W = chunk
-    n_blocks = -(-L // B)
-    Lp = n_blocks * B
-    order = jnp.argsort(-length)
-    order = jnp.concatenate([order, jnp.zeros(Lp - L, order.dtype)])
-    busy = jnp.concatenate([length[order[:L]], jnp.zeros(Lp - L, length.dtype)])
-    r = scenes.starts[s_idx[order], n_idx[order], 3:]
-    n = jnp.zeros(Lp, jnp.int32)
-    hit = jnp.full(Lp, inf)
     offsets = jnp.arange(W, dtype=dtype)
+    r0 = scenes.starts[s_idx, n_idx, 3:]
     if collide:
         _, model, data = col.collision_model(scenes.obj_mask.shape[1], boxes)
         objects = jax.vmap(lambda sc: col.object_geoms(
             sc.obj_kind, sc.obj_center, sc.obj_quat, sc.obj_size, sc.obj_mask, boxes))(scenes)
         gripper = scenes.gripper()
+    if track:
+        fixed_dir, is_yaw = jax.vmap(yaw_directions)(scenes.orient_quat)
+        yaw_lane = jax.vmap(yaw_only)(scenes.task_mask, scenes.cluster, is_yaw)[s_idx]
 
-    def targets(i, k):
-        """(in a meta region, R_M) at sample k of lane i."""
-        s = s_idx[i]
-        sc = jax.tree.map(lambda a: a[s], scenes)
-        init = jax.tree.map(lambda a: a[s], prep_init)
-        opt = jax.tree.map(lambda a: a[s], prep_opt)
-        p = am.sample(jax.tree.map(lambda a: a[i], flat_path), k)
-        return meta_target(init, opt, sc.task_mask, sc.cluster, _orient(sc), p,
-                           sc.activation_tol)
+    def targets(lanes, k, formula):
+        """(in a meta region (B, W), R_M (B, W, 4)) at the samples k (B, W) of the lanes
+        (B), on whole (tasks, lanes, samples) arrays: ``meta_target_yaw_batch`` where
+        every cluster member's frame is a horizontal approach, ``meta_target_batch``
+        (the Markley average) elsewhere."""
+        s = s_idx[lanes]
+
+        def tasks(a, n=0):  # (S, T, *c) -> (*c, T, B, 1): components, tasks, lanes
+            g = a[s]
+            g = jnp.moveaxis(g, tuple(range(2, 2 + n)), tuple(range(n)))
+            return jnp.swapaxes(g, -1, -2)[..., None]
+
+        def lane_vec(a):  # (L, 3) -> (3, B, 1)
+            return a[lanes].T[:, :, None]
+
+        def spaces(prep):
+            return shapes.Prepared(tasks(prep.kind), tasks(prep.center, 1), tasks(prep.rot, 2),
+                                   tasks(prep.dims, 1), tasks(prep.trig, 1))
+
+        # p_k of the step rule (automaton.sample), as (3, B, W).
+        kk = k[None]
+        landing = flat_path.landing[lanes][:, None]
+        step = flat_path.step[lanes][:, None]
+        p = jnp.where(kk >= landing, lane_vec(flat_path.c0),
+                      lane_vec(flat_path.p0) + (kk * step) * lane_vec(flat_path.u))
+        common = (spaces(prep_init), spaces(prep_opt), tasks(scenes.task_mask),
+                  tasks(scenes.cluster), tasks(scenes.orient_kind))
+        if formula == "yaw":
+            orient = (tasks(fixed_dir, 1), tasks(scenes.orient_axis, 1))
+            inside, q = meta_target_yaw_batch(*common, *orient, p,
+                                              scenes.activation_tol[s][:, None])
+        else:
+            orient = (tasks(scenes.orient_quat, 1), tasks(scenes.orient_axis, 1))
+            inside, q = meta_target_batch(*common, *orient, p, scenes.activation_tol[s][:, None])
+        return inside, jnp.moveaxis(q, 0, -1)
 
     def penetrates(i, k, q):
         s = s_idx[i]
@@ -175,63 +204,85 @@ def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, 
         obj = jax.tree.map(lambda a: a[s], objects)
         return col.penetrates(model, data, obj, p, q, gripper[s])
 
-    def run_block(c, b, r, n, hit):
-        lanes = jax.lax.dynamic_slice(order, (b * B,), (B,))
-        left = jax.lax.dynamic_slice(busy, (b * B,), (B,))
-        r_b = jax.lax.dynamic_slice(r, (b * B, 0), (B, 4))
-        n_b = jax.lax.dynamic_slice(n, (b * B,), (B,))
-        hit_b = jax.lax.dynamic_slice(hit, (b * B,), (B,))
-        k = w_from[lanes][:, None] + c * W + offsets[None, :]
-        valid = (c * W + offsets)[None, :] < left[:, None]
-        alive = ~jnp.isfinite(hit_b)
-        if track:
-            m_valid = valid & (k >= m_from[lanes][:, None]) & (k <= m_to[lanes][:, None])
-            inside, goal = jax.vmap(jax.vmap(targets, (None, 0)))(lanes, k)
-            angle = (scenes.omega_max * scenes.dt)[s_idx[lanes]]
-            turned = inside & m_valid
-            if collide:
-                r_end, r_at = jax.vmap(am.rotate_along_path)(r_b, turned, goal, angle)
+    def sweep(length, formula):
+        """Every lane with a non-empty window, in blocks x chunks; (r, n, hit) per lane."""
+        B = min(block, L)
+        n_blocks = -(-L // B)
+        Lp = n_blocks * B
+        order = jnp.argsort(-length)
+        order = jnp.concatenate([order, jnp.zeros(Lp - L, order.dtype)])
+        busy = jnp.concatenate([length[order[:L]], jnp.zeros(Lp - L, length.dtype)])
+        r = r0[order]
+        n = jnp.zeros(Lp, jnp.int32)
+        hit = jnp.full(Lp, inf)
+
+        def run_block(c, b, r, n, hit):
+            lanes = jax.lax.dynamic_slice(order, (b * B,), (B,))
+            left = jax.lax.dynamic_slice(busy, (b * B,), (B,))
+            r_b = jax.lax.dynamic_slice(r, (b * B, 0), (B, 4))
+            n_b = jax.lax.dynamic_slice(n, (b * B,), (B,))
+            hit_b = jax.lax.dynamic_slice(hit, (b * B,), (B,))
+            k = w_from[lanes][:, None] + c * W + offsets[None, :]
+            valid = (c * W + offsets)[None, :] < left[:, None]
+            alive = ~jnp.isfinite(hit_b)
+            if track:
+                m_valid = valid & (k >= m_from[lanes][:, None]) & (k <= m_to[lanes][:, None])
+                inside, goal = targets(lanes, k, formula)
+                angle = (scenes.omega_max * scenes.dt)[s_idx[lanes]]
+                turned = inside & m_valid
+                if collide:
+                    r_end, r_at = jax.vmap(am.rotate_along_path)(r_b, turned, goal, angle)
+                else:
+                    r_end, _ = jax.vmap(am.rotate_along)(r_b, turned, goal, angle)
             else:
-                r_end, _ = jax.vmap(am.rotate_along)(r_b, turned, goal, angle)
-        else:
-            r_end = r_b
-            r_at = jnp.broadcast_to(r_b[:, None, :], (B, W, 4))
-            turned = jnp.zeros((B, W), bool)
-        if collide:
-            c_valid = valid & (k >= c_from[lanes][:, None]) & (k <= c_to[lanes][:, None])
-            pen = jax.vmap(jax.vmap(penetrates, (None, 0, 0)))(lanes, k, r_at) & c_valid
-            first = jnp.argmax(pen, axis=1)
-            hit_now = jnp.any(pen, axis=1) & alive
-            upto = jnp.where(hit_now, first, W)
-            r_end = jnp.where(hit_now[:, None], r_at[jnp.arange(B), first], r_end)
-            hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
-        else:
-            upto = jnp.full(B, W)
-        counted = turned & (offsets[None, :] < upto[:, None])
-        n_b = n_b + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(n.dtype)
-        r_b = jnp.where(alive[:, None], r_end, r_b)
-        return (jax.lax.dynamic_update_slice(r, r_b, (b * B, 0)),
-                jax.lax.dynamic_update_slice(n, n_b, (b * B,)),
-                jax.lax.dynamic_update_slice(hit, hit_b, (b * B,)))
+                r_end = r_b
+                r_at = jnp.broadcast_to(r_b[:, None, :], (B, W, 4))
+                turned = jnp.zeros((B, W), bool)
+            if collide:
+                c_valid = valid & (k >= c_from[lanes][:, None]) & (k <= c_to[lanes][:, None])
+                pen = jax.vmap(jax.vmap(penetrates, (None, 0, 0)))(lanes, k, r_at) & c_valid
+                first = jnp.argmax(pen, axis=1)
+                hit_now = jnp.any(pen, axis=1) & alive
+                upto = jnp.where(hit_now, first, W)
+                r_end = jnp.where(hit_now[:, None], r_at[jnp.arange(B), first], r_end)
+                hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
+            else:
+                upto = jnp.full(B, W)
+            counted = turned & (offsets[None, :] < upto[:, None])
+            n_b = n_b + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(n.dtype)
+            r_b = jnp.where(alive[:, None], r_end, r_b)
+            return (jax.lax.dynamic_update_slice(r, r_b, (b * B, 0)),
+                    jax.lax.dynamic_update_slice(n, n_b, (b * B,)),
+                    jax.lax.dynamic_update_slice(hit, hit_b, (b * B,)))
 
-    def run_chunk(c, state):
-        # Lanes with more than c W samples left form a prefix of the sorted order.
-        active = jnp.sum(busy > c * W)
-        n_active_blocks = (active + B - 1) // B
+        def run_chunk(c, state):
+            # Lanes with more than c W samples left form a prefix of the sorted order.
+            active = jnp.sum(busy > c * W)
+            n_active_blocks = (active + B - 1) // B
 
-        def body(carry):
-            b, state = carry
-            return b + 1, run_block(c, b, *state)
+            def body(carry):
+                b, state = carry
+                return b + 1, run_block(c, b, *state)
 
-        _, state = jax.lax.while_loop(lambda x: x[0] < n_active_blocks, body, (0, state))
-        return state
+            _, state = jax.lax.while_loop(lambda x: x[0] < n_active_blocks, body, (0, state))
+            return state
 
-    n_chunks = jnp.ceil(jnp.max(length) / W).astype(jnp.int32)
-    _, (r, n, hit) = jax.lax.while_loop(lambda x: x[0] < n_chunks,
-                                        lambda x: (x[0] + 1, run_chunk(x[0], x[1])),
-                                        (0, (r, n, hit)))
-    inv = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))
-    return r[inv].reshape(S, N, T, 4), n[inv].reshape(S, N, T), hit[inv].reshape(S, N, T)
+        n_chunks = jnp.ceil(jnp.max(length) / W).astype(jnp.int32)
+        _, (r, n, hit) = jax.lax.while_loop(lambda x: x[0] < n_chunks,
+                                            lambda x: (x[0] + 1, run_chunk(x[0], x[1])),
+                                            (0, (r, n, hit)))
+        inv = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))
+        return r[inv], n[inv], hit[inv]
+
+    if not track or meta != "both":
+        r, n, hit = sweep(length, meta)
+    else:
+        # Two sweeps over disjoint lanes, each compiled for its own target formula.
+        yaw_part = sweep(jnp.where(yaw_lane, length, 0.0), "yaw")
+        general_part = sweep(jnp.where(yaw_lane, 0.0, length), "general")
+        r, n, hit = (jnp.where(yaw_lane.reshape((L,) + (1,) * (a.ndim - 1)), a, b)
+                     for a, b in zip(yaw_part, general_part, strict=True))
+    return r.reshape(S, N, T, 4), n.reshape(S, N, T), hit.reshape(S, N, T)
 
 
 def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
@@ -256,9 +307,9 @@ def _assemble(sc: Scenes, out: am.Outcome, r, meta_steps) -> Rollouts:
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr)
 
 
-@partial(jax.jit, static_argnames=("modes", "block_size", "chunk", "collide", "boxes"))
+@partial(jax.jit, static_argnames=("modes", "block_size", "chunk", "collide", "boxes", "meta"))
 def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int, chunk: int = 16,
-              collide: bool = False, boxes: bool = False) -> Evaluation:
+              collide: bool = False, boxes: bool = False, meta: str = "general") -> Evaluation:
     passes = {}
     if "baseline" in modes:
         passes["init"] = jax.vmap(lambda sc: _activation_pass(sc, "init"))(scenes)
@@ -276,7 +327,7 @@ def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int, chunk: in
             # Collision checks get smaller blocks: each pose is a whole MJX collision call.
             block = max(1, block_size // 8) if collide else block_size
             r, meta_steps, hit = _sweep_lanes(scenes, path, act, block, chunk, track,
-                                              collide, boxes)
+                                              collide, boxes, meta)
             out = _collided(out, path, hit)
         else:
             r, meta_steps = r0, no_meta
@@ -308,17 +359,22 @@ def evaluate(scenes, modes=MODES, block_size: int | None = None) -> Evaluation:
     block = default_block_size() if block_size is None else int(block_size)
     if block < 1:
         raise ValueError(f"block_size must be >= 1, got {block}")
-    return _evaluate(scenes, _check_modes(modes), block, **_collision_layout(scenes))
+    return _evaluate(scenes, _check_modes(modes), block, **static_layout(scenes))
 
 
-def _collision_layout(scenes: Scenes) -> dict:
-    """Static layout read on the host: whether any scene checks collisions, and whether
-    any has a box (the MJX model gets box slots only then)."""
+def static_layout(scenes: Scenes) -> dict:
+    """The static arguments read off the data on the host: whether any scene checks
+    collisions, whether any has a box (the MJX model gets box slots only then), and
+    which meta-target formulas the scenes need (see :func:`_sweep_lanes`)."""
     import numpy as np
 
     collide = bool(np.asarray(scenes.collision).any())
     boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == col.BOX)).any())
-    return {"collide": collide, "boxes": boxes}
+    _, is_yaw = jax.vmap(yaw_directions)(jnp.asarray(scenes.orient_quat))
+    yaw = np.asarray(jax.vmap(yaw_only)(jnp.asarray(scenes.task_mask),
+                                        jnp.asarray(scenes.cluster), is_yaw))
+    meta = "yaw" if yaw.all() else "general" if not yaw.any() else "both"
+    return {"collide": collide, "boxes": boxes, "meta": meta}
 
 
 def _pad_scenes(host: Scenes, parts: int) -> Scenes:
@@ -361,15 +417,15 @@ def evaluate_on_devices(scenes, modes=MODES, devices=None) -> Evaluation:
     return jax.tree.map(lambda a: a[:S], joined)
 
 
-@partial(jax.jit, static_argnames=("modes", "block_size", "mesh", "collide", "boxes"))
+@partial(jax.jit, static_argnames=("modes", "block_size", "mesh", "collide", "boxes", "meta"))
 def _evaluate_sharded(scenes: Scenes, modes, block_size: int, mesh, collide: bool,
-                      boxes: bool) -> Evaluation:
+                      boxes: bool, meta: str) -> Evaluation:
     from jax.sharding import PartitionSpec as P
 
     def local(part: Scenes) -> Evaluation:
         # Each device evaluates its own scenes: the lane sort and the while loops of the
         # tracking are per device, with no communication.
-        return _evaluate.__wrapped__(part, modes, block_size, 16, collide, boxes)
+        return _evaluate.__wrapped__(part, modes, block_size, 16, collide, boxes, meta)
 
     return jax.shard_map(local, mesh=mesh, in_specs=P("scenes"), out_specs=P("scenes"),
                          check_vma=False)(scenes)
@@ -394,7 +450,7 @@ def evaluate_sharded(scenes, modes=MODES, devices=None) -> Evaluation:
     mesh = Mesh(np.array(devices), ("scenes",))
     sharded = jax.device_put(tuple(host), NamedSharding(mesh, P("scenes")))
     out = _evaluate_sharded(Scenes(*sharded), _check_modes(modes), default_block_size(), mesh,
-                            **_collision_layout(host))
+                            **static_layout(host))
     return jax.tree.map(lambda a: np.asarray(a)[:S], out)
 
 

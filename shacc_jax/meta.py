@@ -9,6 +9,19 @@ with the smallest sdf^init is taken, the lower task index on a tie.
 R_M(p) is the Markley average of the members' orientations R_i(p), weighted
 w_i = (1 / d_i^2) / sum_j (1 / d_j^2), d_i = max(sdf_i^opt(p), 1e-6). Padded
 tasks and tasks of other clusters get weight zero.
+
+Every orientation space of the side, handle and drawer grasps is a horizontal
+approach frame, q = yaw(psi) * q_forward. For such quaternions the Markley
+average has a closed form: right multiplication by q_forward is orthogonal, so
+M's top eigenvector is yaw(psi_M) * q_forward with the top eigenvector
+(cos psi_M/2, sin psi_M/2) of the 2 x 2 matrix sum_i w_i (c_i, s_i)(c_i, s_i)^T,
+c_i = cos psi_i/2, s_i = sin psi_i/2; and that is the half angle of
+psi_M = atan2(sum_i w_i sin psi_i, sum_i w_i cos psi_i) (the double-angle
+identities give tan 2 theta = 2 m01 / (m00 - m11)). So R_M is the approach frame
+of the weighted sum of the members' unit approach directions
+(:func:`meta_target_yaw`); the general Markley average (:func:`meta_target`) is
+needed only where a cluster has a top grasp. Where that sum vanishes, M's top
+eigenvalue is double and any average is as good: we take psi_M = 0.
 """
 
 from __future__ import annotations
@@ -19,9 +32,8 @@ from jaxtyping import Array, Bool, Float, Int
 
 from . import quaternion as quat
 from . import shapes
-from .orientation import task_orientation
+from .orientation import fixed_direction, horizontal_approach_quat, task_direction, task_orientation
 
-_all_orient = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))
 MIN_DISTANCE = 1e-6
 
 
@@ -35,12 +47,89 @@ def meta_weights(opt: shapes.Prepared, in_cluster: Bool[Array, " T"],
 def meta_target(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
                 cluster: Int[Array, " T"], orient, p: Float[Array, "3"],
                 tau: Array) -> tuple[Array, Float[Array, "4"]]:
-    """(p is in a meta region, R_M(p) of that region's cluster)."""
-    member = mask & (cluster >= 0)
-    sd = shapes.all_sdf(init, p)
-    inside = member & (sd <= tau)
-    chosen = cluster[jnp.argmin(jnp.where(inside, sd, jnp.inf))]
-    w = meta_weights(opt, member & (cluster == chosen), p)
+    """(p is in a meta region, R_M(p) of that region's cluster). One point;
+    :func:`meta_target_batch` is the batched form the evaluation uses."""
     kind, q_fixed, axis = orient
-    qs = _all_orient(kind, q_fixed, axis, p)
-    return jnp.any(inside), quat.markley_average(qs, w)
+    return meta_target_batch(shapes.components_first(init), shapes.components_first(opt),
+                             mask, cluster, kind, q_fixed.T, axis.T, p, tau)
+
+
+def meta_target_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array, cluster: Array,
+                      orient_kind: Array, orient_quat: Array, axis: Array, p: Array,
+                      tau: Array) -> tuple[Array, Array]:
+    """:func:`meta_target` in the layout of :func:`meta_target_yaw_batch` (orient_quat
+    (4, T, *batch)): returns (inside (*batch), R_M (4, *batch))."""
+    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
+    w = w / jnp.maximum(jnp.sum(w, axis=0), jnp.finfo(w.dtype).tiny)
+    qs = task_orientation(orient_kind, orient_quat, axis, p)  # (4, T, *batch)
+    return inside, quat.markley_average_batch(qs, w)
+
+
+def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]:
+    """(p is in a meta region (*batch), the unnormalised weights 1 / d_i^2 of the
+    chosen cluster's members (T, *batch)), in the batch layout."""
+    member = mask & (cluster >= 0)
+    sd = shapes.prepared_sdf(init, p)
+    inside = member & (sd <= tau)
+    chosen = _chosen_cluster(inside, sd, cluster)
+    d = jnp.maximum(shapes.prepared_sdf(opt, p), MIN_DISTANCE)
+    return jnp.any(inside, axis=0), jnp.where(member & (cluster == chosen), 1.0 / (d * d), 0.0)
+
+
+def _chosen_cluster(inside: Array, sd: Array, cluster: Array) -> Array:
+    """``cluster[argmin(where(inside, sd, inf))]`` over axis 0 (tasks), the lowest index
+    on a tie, as plain min reductions that XLA vectorises across the batch axes."""
+    key = jnp.where(inside, sd, jnp.inf)
+    T = key.shape[0]
+    index = jnp.arange(T).reshape((T,) + (1,) * (key.ndim - 1))
+    first = jnp.min(jnp.where(key == jnp.min(key, axis=0), index, T), axis=0)
+    return jnp.sum(jnp.where(index == first, cluster, 0), axis=0)
+
+
+def yaw_directions(orient_quat: Float[Array, "T 4"]
+                   ) -> tuple[Float[Array, "T 2"], Bool[Array, " T"]]:
+    """Per task: the fixed approach direction of its orientation space (the on-axis
+    one for point-to-axis tasks) and whether that space is a horizontal approach
+    frame everywhere. Both orientation kinds qualify exactly when their ``quat`` is one
+    (a point-to-axis frame is horizontal off the axis)."""
+    return jax.vmap(fixed_direction)(orient_quat)
+
+
+def yaw_only(mask: Bool[Array, " T"], cluster: Int[Array, " T"], is_yaw: Bool[Array, " T"]
+             ) -> Bool[Array, ""]:
+    """Whether :func:`meta_target_yaw` serves the scene: every cluster member's
+    orientation space is a horizontal approach frame."""
+    return jnp.all(is_yaw | ~(mask & (cluster >= 0)))
+
+
+def meta_target_yaw(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
+                    cluster: Int[Array, " T"], orient_kind: Int[Array, " T"],
+                    fixed_dir: Float[Array, "T 2"], axis: Float[Array, "T 2"],
+                    p: Float[Array, "3"], tau: Array) -> tuple[Array, Float[Array, "4"]]:
+    """:func:`meta_target` for scenes whose cluster members all have horizontal approach
+    frames (:func:`yaw_only`): the closed form of the module docstring, no eigenvector
+    iteration. One point; :func:`meta_target_yaw_batch` is the batched form the
+    evaluation uses. Tested equal to :func:`meta_target` in tests/test_quaternion.py."""
+    return meta_target_yaw_batch(shapes.components_first(init), shapes.components_first(opt),
+                                 mask, cluster, orient_kind, fixed_dir.T, axis.T, p, tau)
+
+
+def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array,
+                          cluster: Array, orient_kind: Array, fixed_dir: Array, axis: Array,
+                          p: Array, tau: Array) -> tuple[Array, Array]:
+    """:func:`meta_target_yaw` on arrays laid out for XLA: per-task arrays are
+    (T, *batch), vectors put their components first, (3, T, *batch) or (2, T, *batch)
+    (``shapes.components_first``), and p is (3, *batch); any shapes that broadcast
+    work. Returns (inside (*batch), R_M (4, *batch)). The task reductions run over a
+    leading axis, so each is a few elementwise operations on whole batch arrays;
+    written per point and vmapped, the reductions over a trailing axis of T took most
+    of the time on CPU."""
+    # The weights' normalisation does not change the direction of the sum.
+    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
+    ux, uy = task_direction(orient_kind, fixed_dir, axis, p)
+    ax, ay = jnp.sum(w * ux, axis=0), jnp.sum(w * uy, axis=0)
+    n = jnp.sqrt(ax * ax + ay * ay)
+    ok = n > jnp.finfo(n.dtype).tiny
+    inv = 1.0 / jnp.where(ok, n, 1.0)
+    q = horizontal_approach_quat(jnp.where(ok, ax * inv, 1.0), jnp.where(ok, ay * inv, 0.0))
+    return inside, q * jnp.where(q[0] < 0, -1.0, 1.0)

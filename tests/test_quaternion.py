@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from geometry_precompute.frames import frame_from_approach as cpu_frame
 from shacc_jax import quaternion as quat
-from shacc_jax.meta import meta_target, meta_weights
-from shacc_jax.orientation import frame_from_approach, task_orientation
+from shacc_jax.meta import meta_target, meta_target_yaw, meta_weights, yaw_directions, yaw_only
+from shacc_jax.orientation import fixed_direction, frame_from_approach, task_orientation
 from shacc_jax.shapes import prepare_all
 from shacc_jax.types import Spaces
 
@@ -187,3 +187,79 @@ def test_meta_target_region_and_mask():
                             jnp.array([-0.15, 0.0, 0.0]), 1e-4)
     expected0 = wxyz(Rotation.from_matrix(cpu_frame([0.15, -0.1, 0.0])))
     assert bool(inside) and angle_np(np.asarray(q), expected0) < 1e-4
+
+
+@given(yaw=st.floats(-np.pi, np.pi), tilt=st.floats(0.05, 1.5))
+def test_fixed_direction_recognises_horizontal_frames(yaw, tilt):
+    """A horizontal approach frame is yaw(psi) * q_forward: its direction comes back as
+    (cos psi, sin psi). A frame approaching at a tilt is not one."""
+    a = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    q = jnp.asarray(wxyz(Rotation.from_matrix(cpu_frame(a))))
+    d, is_yaw = fixed_direction(q)
+    assert bool(is_yaw)
+    np.testing.assert_allclose(np.asarray(d), a[:2], atol=1e-6)
+    tilted = np.array([np.cos(yaw) * np.cos(tilt), np.sin(yaw) * np.cos(tilt), -np.sin(tilt)])
+    _, tilted_yaw = fixed_direction(jnp.asarray(wxyz(Rotation.from_matrix(cpu_frame(tilted)))))
+    assert not bool(tilted_yaw)
+
+
+def _yaw_cluster_scene(rng: np.random.Generator, T: int = 7):
+    """T random cylinders and cones near the origin, in two clusters plus an unclustered
+    and a masked task; orientation spaces point-to-axis or fixed horizontal frames."""
+    kinds = rng.choice([0, 2], T)
+    centers = rng.uniform(-0.15, 0.15, (T, 3))
+    quats = wxyz(Rotation.random(T, random_state=rng))
+    dims = np.stack([rng.uniform(0.05, 0.2, T), np.where(kinds == 2, rng.uniform(0.2, 0.5, T),
+                                                         rng.uniform(0.05, 0.3, T)),
+                     np.zeros(T)], axis=1)
+    init = Spaces(jnp.asarray(kinds, jnp.int32), jnp.asarray(centers), jnp.asarray(quats),
+                  jnp.asarray(dims))
+    opt = init._replace(dims=init.dims * jnp.asarray([0.6, 1.0, 1.0]))
+    cluster = np.array(([0, 1] * T)[:T])
+    cluster[-2] = -1
+    mask = np.ones(T, bool)
+    mask[-1] = False
+    yaws = rng.uniform(-np.pi, np.pi, T)
+    q_fixed = np.stack([wxyz(Rotation.from_matrix(cpu_frame([np.cos(y), np.sin(y), 0.0])))
+                        for y in yaws])
+    orient = (jnp.asarray(rng.integers(0, 2, T), jnp.int32), jnp.asarray(q_fixed),
+              jnp.asarray(centers[:, :2] + rng.normal(0, 0.02, (T, 2))))
+    return prepare_all(*init), prepare_all(*opt), jnp.asarray(mask), jnp.asarray(cluster), orient
+
+
+_general_targets = jax.jit(jax.vmap(meta_target, in_axes=(None,) * 5 + (0, None)))
+_closed_targets = jax.jit(jax.vmap(meta_target_yaw, in_axes=(None,) * 7 + (0, None)))
+
+
+@given(seed=st.integers(0, 10_000))
+def test_meta_target_yaw_equals_markley_average(seed):
+    """The closed form for horizontal approach frames gives the general Markley target
+    (float64: to the resolution of the angle), at random points, on task axes, in
+    regions of either cluster and outside."""
+    rng = np.random.default_rng(seed)
+    with jax.enable_x64(True):
+        init, opt, mask, cluster, orient = _yaw_cluster_scene(rng)
+        pts = rng.uniform(-0.35, 0.35, (300, 3))
+        pts[:5, :2] = np.asarray(orient[2])[:5]  # on point-to-axis axes
+        pts = jnp.asarray(pts)
+        fixed_dir, is_yaw = yaw_directions(orient[1])
+        assert bool(is_yaw.all())
+        general = _general_targets(init, opt, mask, cluster, orient, pts, 1e-4)
+        closed = _closed_targets(init, opt, mask, cluster, orient[0], fixed_dir, orient[2], pts,
+                                 1e-4)
+    np.testing.assert_array_equal(np.asarray(general[0]), np.asarray(closed[0]))
+    assert np.asarray(general[0]).any()
+    worst = max(angle_np(a, b)
+                for a, b in zip(np.asarray(general[1]), np.asarray(closed[1]), strict=True))
+    assert worst < 1e-6, worst
+
+
+def test_yaw_only_needs_every_member_horizontal():
+    down = wxyz(Rotation.from_matrix(cpu_frame([0.0, 0.0, -1.0])))
+    side = wxyz(Rotation.from_matrix(cpu_frame([1.0, 0.0, 0.0])))
+    _, is_yaw = yaw_directions(jnp.asarray(np.stack([side, down, side])))
+    np.testing.assert_array_equal(np.asarray(is_yaw), [True, False, True])
+    mask = jnp.array([True, True, True])
+    assert not bool(yaw_only(mask, jnp.array([0, 0, 1]), is_yaw))
+    assert bool(yaw_only(mask, jnp.array([0, -1, 1]), is_yaw))  # the top grasp not clustered
+    assert bool(yaw_only(jnp.array([True, False, True]), jnp.array([0, 0, 0]), is_yaw))

@@ -111,9 +111,15 @@ def test_tables_and_values(finished):
 def test_rerun_is_a_no_op(finished):
     cfg, out, cache, _ = finished
     before = (out / "scenes.parquet").stat().st_mtime_ns
+    # What a run killed in the middle of a write leaves: write_atomic's temporary files.
+    stale = [out / "parts" / ".scenes-000001.parquet.k1ll3d.tmp",
+             out / ".rollouts.parquet.k1ll3d.tmp"]
+    for p in stale:
+        p.write_bytes(b"half a file")
     again = run_sweep(cfg, out, cache, workers=1, progress=False)
     assert again["status"].startswith("nothing to do")
     assert (out / "scenes.parquet").stat().st_mtime_ns == before
+    assert not any(p.exists() for p in stale)
 
 
 def test_rollout_setting_reuses_the_cache(finished, tmp_path):
