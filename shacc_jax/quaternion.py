@@ -149,11 +149,9 @@ def markley_average_batch(quats: Array, weights: Array,
     m = normalise(tuple(jnp.sum(weights * quats[i] * quats[j], axis=0) for i, j in _UPPER))
     unroll = _unroll(squarings)
     if unroll > 1:
-        # Unrolled (accelerators): the same squarings on a stacked (10, ...) array, which
-        # XLA fuses into the surrounding pass; unrolled, the tuple form took XLA 20 s
-        # to compile where this takes 1 s. Keep this exact form: normalising the
-        # tuple before stacking measured 0.457 s against 0.355 s for 10.8 M rollouts
-        # on an H200.
+        # Unrolled (only when asked for, see MARKLEY_UNROLL): the same squarings on a
+        # stacked (10, ...) array, which XLA fuses into the surrounding pass; unrolled,
+        # the tuple form took XLA 20 s to compile where this takes 1 s.
         def square_stacked(_, a):
             e = [a[k] for k in range(10)]
             new = [sum(e[_SLOT[i][k]] * e[_SLOT[k][j]] for k in range(4)) for i, j in _UPPER]
@@ -176,17 +174,19 @@ def markley_average_batch(quats: Array, weights: Array,
     return jnp.stack([b * inv for b in best])
 
 
-# Unrolling the squarings lets XLA fuse them with the rest of the meta-target pass on
-# a GPU (one kernel instead of one per squaring: 0.89 -> 0.36 s for 3.6 M shacc
-# rollouts); on CPU the rolled loop over a tuple of entries is fastest
-# (benchmarks/RESULTS.md). None picks by backend; set an int to override.
+# How far the squaring loop is unrolled. Rolled (1) on every backend by default: in the
+# batch layout of the meta targets, the rolled loop over a tuple of entries measured
+# 0.330 s against 0.642 s unrolled for 10.8 M rollouts on an H100 (every lane on the
+# Markley path), and it was already the faster form on CPU. (Written per point and
+# vmapped, unrolling had been the faster form on the GPU: 0.89 -> 0.36 s on an H200.)
+# Set an int to override (benchmarks/bench_rollouts.py --markley-unroll).
 MARKLEY_UNROLL: int | None = None
 
 
 def _unroll(squarings: int) -> int:
     if MARKLEY_UNROLL is not None:
         return max(1, min(MARKLEY_UNROLL, squarings))
-    return squarings if jax.default_backend() in ("gpu", "tpu") else 1
+    return 1
 
 
 _UPPER = [(0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3)]
