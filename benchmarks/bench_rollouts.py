@@ -103,10 +103,6 @@ def cmd_run(args) -> None:
     from shacc_jax.evaluation import _evaluate, static_layout
 
     modes = tuple(args.modes)
-    if args.markley_unroll is not None:
-        from shacc_jax import quaternion
-
-        quaternion.MARKLEY_UNROLL = args.markley_unroll
     rows = []
     dev = jax.devices()[0]
     if args.devices:
@@ -137,7 +133,7 @@ def cmd_run(args) -> None:
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
                "chunk": args.chunk, "collision": args.collision,
-               "markley_unroll": args.markley_unroll, "meta": layout["meta"],
+               "meta": layout["meta"],
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
@@ -212,7 +208,6 @@ def main() -> None:
     r.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
     r.add_argument("--block", type=int, default=None)
     r.add_argument("--chunk", type=int, default=16)
-    r.add_argument("--markley-unroll", type=int, default=None)
     r.add_argument("--meta", choices=["yaw", "general"], default=None,
                    help="force the meta-target formula (default: what the scenes need)")
     r.add_argument("--grid", type=int, nargs=2, metavar=("NY", "NZ"),

@@ -159,8 +159,8 @@ def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, 
             sc.obj_kind, sc.obj_center, sc.obj_quat, sc.obj_size, sc.obj_mask, boxes))(scenes)
         gripper = scenes.gripper()
     if track:
-        fixed_dir, is_yaw = jax.vmap(yaw_directions)(scenes.orient_quat)
-        yaw_lane = jax.vmap(yaw_only)(scenes.task_mask, scenes.cluster, is_yaw)[s_idx]
+        fixed_dir, yaw_scene = _yaw_scenes(scenes)
+        yaw_lane = yaw_scene[s_idx]
 
     def targets(lanes, k, formula):
         """(in a meta region (B, W), R_M (B, W, 4)) at the samples k (B, W) of the lanes
@@ -285,6 +285,15 @@ def _sweep_lanes(scenes: Scenes, path: am.Path, act: am.Activation, block: int, 
     return r.reshape(S, N, T, 4), n.reshape(S, N, T), hit.reshape(S, N, T)
 
 
+def _yaw_scenes(scenes: Scenes) -> tuple[Array, Array]:
+    """The tasks' fixed approach directions (S, T, 2), and per scene (S) whether every
+    cluster member's orientation space is a horizontal approach frame (the closed form
+    of ``meta.meta_target_yaw_batch`` serves it)."""
+    fixed_dir, is_yaw = jax.vmap(yaw_directions)(jnp.asarray(scenes.orient_quat))
+    return fixed_dir, jax.vmap(yaw_only)(jnp.asarray(scenes.task_mask),
+                                         jnp.asarray(scenes.cluster), is_yaw)
+
+
 def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
     """SPEC section 9's ``collision`` outcome where the gripper penetrated an object at
     sample ``hit`` (at or before the activation sample)."""
@@ -370,9 +379,7 @@ def static_layout(scenes: Scenes) -> dict:
 
     collide = bool(np.asarray(scenes.collision).any())
     boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == col.BOX)).any())
-    _, is_yaw = jax.vmap(yaw_directions)(jnp.asarray(scenes.orient_quat))
-    yaw = np.asarray(jax.vmap(yaw_only)(jnp.asarray(scenes.task_mask),
-                                        jnp.asarray(scenes.cluster), is_yaw))
+    yaw = np.asarray(_yaw_scenes(scenes)[1])
     meta = "yaw" if yaw.all() else "general" if not yaw.any() else "both"
     return {"collide": collide, "boxes": boxes, "meta": meta}
 

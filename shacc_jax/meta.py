@@ -39,9 +39,7 @@ MIN_DISTANCE = 1e-6
 
 def meta_weights(opt: shapes.Prepared, in_cluster: Bool[Array, " T"],
                  p: Float[Array, "3"]) -> Array:
-    d = jnp.maximum(shapes.all_sdf(opt, p), MIN_DISTANCE)
-    w = jnp.where(in_cluster, 1.0 / (d * d), 0.0)
-    return w / jnp.maximum(jnp.sum(w), jnp.finfo(w.dtype).tiny)
+    return _normalised(_inverse_square(shapes.all_sdf(opt, p), in_cluster))
 
 
 def meta_target(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
@@ -60,9 +58,19 @@ def meta_target_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array, 
     """:func:`meta_target` in the layout of :func:`meta_target_yaw_batch` (orient_quat
     (4, T, *batch)): returns (inside (*batch), R_M (4, *batch))."""
     inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
-    w = w / jnp.maximum(jnp.sum(w, axis=0), jnp.finfo(w.dtype).tiny)
     qs = task_orientation(orient_kind, orient_quat, axis, p)  # (4, T, *batch)
-    return inside, quat.markley_average_batch(qs, w)
+    return inside, quat.markley_average_batch(qs, _normalised(w))
+
+
+def _inverse_square(sd_opt: Array, in_cluster: Array) -> Array:
+    """SPEC section 8's unnormalised weights 1 / d_i^2, d_i = max(sdf_i^opt, 1e-6)."""
+    d = jnp.maximum(sd_opt, MIN_DISTANCE)
+    return jnp.where(in_cluster, 1.0 / (d * d), 0.0)
+
+
+def _normalised(w: Array) -> Array:
+    """Weights over axis 0 (tasks) scaled to sum to one."""
+    return w / jnp.maximum(jnp.sum(w, axis=0), jnp.finfo(w.dtype).tiny)
 
 
 def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]:
@@ -72,8 +80,8 @@ def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]
     sd = shapes.prepared_sdf(init, p)
     inside = member & (sd <= tau)
     chosen = _chosen_cluster(inside, sd, cluster)
-    d = jnp.maximum(shapes.prepared_sdf(opt, p), MIN_DISTANCE)
-    return jnp.any(inside, axis=0), jnp.where(member & (cluster == chosen), 1.0 / (d * d), 0.0)
+    w = _inverse_square(shapes.prepared_sdf(opt, p), member & (cluster == chosen))
+    return jnp.any(inside, axis=0), w
 
 
 def _chosen_cluster(inside: Array, sd: Array, cluster: Array) -> Array:

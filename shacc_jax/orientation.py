@@ -68,19 +68,22 @@ def task_direction(kind, fixed_dir: Float[Array, "2"], axis: Float[Array, "2"],
     orientation space is a horizontal approach frame (see :func:`fixed_direction`):
     :func:`task_orientation` is ``horizontal_approach_quat`` of it. Returned as two
     components, not a stacked 2-vector (vmapped, they stay plain arrays)."""
-    dx, dy = axis[0] - p[0], axis[1] - p[1]
-    r2 = dx * dx + dy * dy
-    on_axis = r2 <= ON_AXIS**2
-    inv = 1.0 / jnp.sqrt(jnp.where(on_axis, 1.0, r2))
+    ux, uy, on_axis = _toward_axis(axis, p)
     pta = (kind == POINT_TO_AXIS) & ~on_axis
-    return jnp.where(pta, dx * inv, fixed_dir[0]), jnp.where(pta, dy * inv, fixed_dir[1])
+    return jnp.where(pta, ux, fixed_dir[0]), jnp.where(pta, uy, fixed_dir[1])
 
 
 def task_orientation(kind, q_fixed: Float[Array, "4"], axis: Float[Array, "2"],
                      p: Float[Array, "3"]) -> Float[Array, "4"]:
+    ux, uy, on_axis = _toward_axis(axis, p)
+    return jnp.where((kind == POINT_TO_AXIS) & ~on_axis, horizontal_approach_quat(ux, uy), q_fixed)
+
+
+def _toward_axis(axis: Float[Array, "2"], p: Float[Array, "3"]) -> tuple[Array, Array, Array]:
+    """The unit horizontal direction from p to the vertical axis through ``axis``, and
+    whether p is on that axis (then the direction is meaningless)."""
     dx, dy = axis[0] - p[0], axis[1] - p[1]
     r2 = dx * dx + dy * dy
     on_axis = r2 <= ON_AXIS**2
     inv = 1.0 / jnp.sqrt(jnp.where(on_axis, 1.0, r2))
-    q_pta = horizontal_approach_quat(dx * inv, dy * inv)
-    return jnp.where((kind == POINT_TO_AXIS) & ~on_axis, q_pta, q_fixed)
+    return dx * inv, dy * inv, on_axis

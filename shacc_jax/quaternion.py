@@ -22,10 +22,6 @@ def matvec(m: Array, v: Array) -> Array:
     return jnp.sum(m * v[None, :], axis=1)
 
 
-def matmul(a: Array, b: Array) -> Array:
-    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
-
-
 def multiply(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, "4"]:
     aw, ax, ay, az = a
     bw, bx, by, bz = b
@@ -147,20 +143,10 @@ def markley_average_batch(quats: Array, weights: Array,
                                for i, j in _UPPER))
 
     m = normalise(tuple(jnp.sum(weights * quats[i] * quats[j], axis=0) for i, j in _UPPER))
-    unroll = _unroll(squarings)
-    if unroll > 1:
-        # Unrolled (only when asked for, see MARKLEY_UNROLL): the same squarings on a
-        # stacked (10, ...) array, which XLA fuses into the surrounding pass; unrolled,
-        # the tuple form took XLA 20 s to compile where this takes 1 s.
-        def square_stacked(_, a):
-            e = [a[k] for k in range(10)]
-            new = [sum(e[_SLOT[i][k]] * e[_SLOT[k][j]] for k in range(4)) for i, j in _UPPER]
-            return jnp.stack(new) / jnp.maximum(new[0] + new[4] + new[7] + new[9], tiny)
-
-        a = jax.lax.fori_loop(0, squarings, square_stacked, jnp.stack(m), unroll=unroll)
-        m = tuple(a[k] for k in range(10))
-    else:
-        m = jax.lax.fori_loop(0, squarings, square, m)
+    # Rolled on every backend: in the batch layout of the meta targets this measured
+    # 0.330 s against 0.642 s fully unrolled for 10.8 M rollouts on an H100 (every lane
+    # on the Markley path), and it was already the faster form on CPU.
+    m = jax.lax.fori_loop(0, squarings, square, m)
     # The column of the largest diagonal entry (the first on a tie) is the
     # best-conditioned multiple of v.
     best = [m[_SLOT[i][0]] for i in range(4)]
@@ -172,21 +158,6 @@ def markley_average_batch(quats: Array, weights: Array,
     norm = jnp.sqrt(best[0] * best[0] + best[1] * best[1] + best[2] * best[2] + best[3] * best[3])
     inv = 1.0 / jnp.maximum(norm, _eps(norm)) * jnp.where(best[0] < 0, -1.0, 1.0)
     return jnp.stack([b * inv for b in best])
-
-
-# How far the squaring loop is unrolled. Rolled (1) on every backend by default: in the
-# batch layout of the meta targets, the rolled loop over a tuple of entries measured
-# 0.330 s against 0.642 s unrolled for 10.8 M rollouts on an H100 (every lane on the
-# Markley path), and it was already the faster form on CPU. (Written per point and
-# vmapped, unrolling had been the faster form on the GPU: 0.89 -> 0.36 s on an H200.)
-# Set an int to override (benchmarks/bench_rollouts.py --markley-unroll).
-MARKLEY_UNROLL: int | None = None
-
-
-def _unroll(squarings: int) -> int:
-    if MARKLEY_UNROLL is not None:
-        return max(1, min(MARKLEY_UNROLL, squarings))
-    return 1
 
 
 _UPPER = [(0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3)]

@@ -49,8 +49,9 @@ from .output import write_atomic, write_json
 # run on the H200 (rollout outputs, the activation pass and the tracking blocks) with
 # a safety factor: chunks are sized so that a chunk uses at most half the free memory.
 BYTES_PER_ROLLOUT = 600
-# Throughputs measured in benchmarks/RESULTS.md, for --dry-run's time estimate.
-RATES = {"cpu": 3.5e4, "gpu": 3.0e7}
+# Throughputs measured in benchmarks/RESULTS.md, for --dry-run's time estimate (random
+# 10-task scenes: 2 CPU cores 1.4e5 rollouts/s, one H100 9.2e7/s).
+RATES = {"cpu": 1.4e5, "gpu": 9.2e7}
 
 
 def default_cache() -> Path:
@@ -103,9 +104,17 @@ def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
         free = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
     else:
         free = 2 << 30  # CPU: keep a chunk under ~1 GiB of working memory
-    per_scene = BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * \
-        len(cfg.modes) * len(jax.local_devices())
+    per_scene = _bytes_per_scene(cfg, scenes, n_starts) * len(jax.local_devices())
     return max(1, min(cfg.chunk, int(0.5 * free // per_scene)))
+
+
+def _bytes_per_scene(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
+    return BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * len(cfg.modes)
+
+
+def _max_starts(cfg: SweepConfig, scenes: list[Scene]) -> int:
+    """The largest start grid over the sweep's points."""
+    return max(int(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"])) for p in cfg.points)
 
 
 def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, ...]:
@@ -143,9 +152,9 @@ def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, 
     return scenes_df, rollouts_df
 
 
-def _write_parquet(path: Path, df: pd.DataFrame) -> None:
+def _write_parquet(path: Path, table: pa.Table) -> None:
     sink = pa.BufferOutputStream()
-    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), sink)
+    pq.write_table(table, sink)
     write_atomic(path, sink.getvalue().to_pybytes())
 
 
@@ -159,10 +168,9 @@ def dry_run(cfg: SweepConfig) -> dict:
         rollouts += sum(len(s.tasks) for s in scenes) * ny * nz * len(cfg.modes)
     platform = jax.default_backend()
     rate = RATES["gpu" if platform in ("gpu", "cuda", "rocm") else "cpu"]
-    n_starts = max(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"]) for p in points)
-    chunk = _chunk_size(cfg, scenes, int(n_starts))
-    per_chunk = BYTES_PER_ROLLOUT * int(n_starts) * max(len(s.tasks) for s in scenes) * \
-        len(cfg.modes) * chunk
+    n_starts = _max_starts(cfg, scenes)
+    chunk = _chunk_size(cfg, scenes, n_starts)
+    per_chunk = _bytes_per_scene(cfg, scenes, n_starts) * chunk
     return {"points": len(points), "scenes": len(scenes), "scene_evaluations":
             len(points) * len(scenes), "rollouts": int(rollouts), "chunk_scenes": chunk,
             "estimated_memory_per_chunk_MB": per_chunk / 2**20, "devices":
@@ -186,8 +194,7 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
         write_json(marker, {"hash": h, "config": cfg.resolved()})
     final_s, final_r = out / "scenes.parquet", out / "rollouts.parquet"
     scenes = cfg.scenes()
-    starts = {int(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"])) for p in cfg.points}
-    chunk_n = _chunk_size(cfg, scenes, max(starts))
+    chunk_n = _chunk_size(cfg, scenes, _max_starts(cfg, scenes))
     chunks = plan(cfg, len(scenes), chunk_n)
     max_tasks = max(len(s.tasks) for s in scenes)
     parts = out / "parts"
@@ -233,8 +240,9 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
             t = lap("evaluate", t)
             scenes_df, rollouts_df = _tables(cfg, c, results, ev)
             t = lap("tables", t)
-            _write_parquet(parts / f"rollouts-{c.index:06d}.parquet", rollouts_df)
-            _write_parquet(parts / f"scenes-{c.index:06d}.parquet", scenes_df)
+            for name, df in (("rollouts", rollouts_df), ("scenes", scenes_df)):  # this order
+                _write_parquet(parts / f"{name}-{c.index:06d}.parquet",
+                               pa.Table.from_pandas(df, preserve_index=False))
             lap("write", t)
             n_rollouts += len(rollouts_df)
             rate = n_rollouts / (time.perf_counter() - t0)
@@ -243,10 +251,8 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     bar.close()
     for name, final in (("scenes", final_s), ("rollouts", final_r)):
         files = [parts / f"{name}-{c.index:06d}.parquet" for c in chunks]
-        table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
-        sink = pa.BufferOutputStream()
-        pq.write_table(table, sink)
-        write_atomic(final, sink.getvalue().to_pybytes())
+        _write_parquet(final, pa.concat_tables([pq.read_table(f) for f in files],
+                                               promote_options="default"))
     summary.update({"status": "complete", "rollouts_this_run": n_rollouts,
                     "precompute_cache_hits": hits_total, "precomputed": computed,
                     "seconds": time.perf_counter() - t0,
