@@ -14,7 +14,6 @@ import math
 
 import manifold3d as m3
 import numpy as np
-import trimesh
 
 from .shapes import Shape
 
@@ -42,11 +41,15 @@ def shape_manifold(shape: Shape, sections: int) -> m3.Manifold:
     return local.transform(_pose_matrix(shape))
 
 
-def manifold_to_trimesh(m: m3.Manifold) -> trimesh.Trimesh:
+def manifold_to_trimesh(m: m3.Manifold):
+    """The manifold as a ``trimesh.Trimesh`` (trimesh is imported here, on first use:
+    the precompute itself needs only manifold3d)."""
+    import trimesh
+
     mesh = m.to_mesh64()
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3],
                            np.asarray(mesh.tri_verts), process=False)
 
 
-def shape_trimesh(shape: Shape, sections: int) -> trimesh.Trimesh:
+def shape_trimesh(shape: Shape, sections: int):
     return manifold_to_trimesh(shape_manifold(shape, sections))

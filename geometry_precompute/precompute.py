@@ -8,12 +8,15 @@ consumes. It runs once per scene; its cost is measured by
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .clusters import clusters_from_pairs, intersecting_pairs
 from .clutteredness import clutteredness
+from .errors import InputError
 from .intersect import SpaceSet
 from .metrics import entropic_clutteredness, mean_distance
 from .scene import Scene
@@ -52,8 +55,25 @@ class PrecomputeResult:
         return [c for c in self.clusters if len(c) >= 2]
 
 
-def precompute(scene: Scene, settings: Settings | None = None) -> PrecomputeResult:
-    s = scene.settings() if settings is None else settings
+def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = None
+               ) -> PrecomputeResult:
+    """C, clusters, Shrinking, C_final, d and h of one scene.
+
+    ``settings``: a :class:`Settings`, or a plain mapping of overrides (validated over
+    the scene's own ``[settings]``, as ``--set`` is: a bad name or value raises
+    :class:`InputError`), or None for the scene's settings."""
+    if not isinstance(scene, Scene):
+        raise InputError("<precompute>", "scene", f"must be a Scene (load_scene), got "
+                         f"{type(scene).__name__}")
+    if settings is None:
+        s = scene.settings()
+    elif isinstance(settings, Settings):
+        s = settings
+    elif isinstance(settings, Mapping):
+        s = scene.settings(overrides=settings)
+    else:
+        raise InputError("<precompute>", "settings", "must be a Settings or a mapping of "
+                         f"setting = value, got {type(settings).__name__}")
     t0 = time.perf_counter()
     spaces = resolve_tasks(scene, s)
     shapes_init = [sp.shape() for sp in spaces]

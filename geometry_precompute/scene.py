@@ -21,10 +21,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import tomli_w
 
 from .errors import InputError
-from .settings import DEFAULTS, OBJECT_DEFAULTS, Settings
+from .settings import (
+    COORD_LIMIT,
+    DEFAULTS,
+    LENGTH_LIMIT,
+    OBJECT_DEFAULTS,
+    Settings,
+    flatten_settings,
+)
 
 OBJECT_KINDS = ("mug", "cup", "box")
 TEMPLATE_OBJECTS = {
@@ -47,6 +55,7 @@ TEMPLATE_FIXED = {
 }
 # Objects interpenetrate when coal's signed distance between bodies is below this.
 INTERPENETRATION_TOL = 1e-6
+YAW_LIMIT = 1000.0  # rad; any angle is allowed, but not one whose cosine is rounding noise
 
 
 @dataclass(frozen=True)
@@ -113,13 +122,18 @@ _OBJECT_KEYS = {"id", "kind", "position", "yaw", "radius", "height", "half_exten
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 
 
-def _number(value: Any, src: str, fld: str, positive: bool = False) -> float:
+def _number(value: Any, src: str, fld: str, positive: bool = False,
+            limit: float = COORD_LIMIT) -> float:
+    """A finite number; a size (``positive``) in (0, LENGTH_LIMIT], anything else within
+    ``limit`` of zero (settings.py says why every number has a range)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(src, fld, f"must be a number, got {value!r}")
     if not math.isfinite(value):
         raise InputError(src, fld, "must be finite (no NaN or inf)")
-    if positive and value <= 0:
-        raise InputError(src, fld, f"must be > 0, got {value!r}")
+    if positive and not 0 < value <= LENGTH_LIMIT:
+        raise InputError(src, fld, f"must be > 0 and at most {LENGTH_LIMIT:g} m, got {value!r}")
+    if not positive and abs(value) > limit:
+        raise InputError(src, fld, f"must be within [-{limit:g}, {limit:g}], got {value!r}")
     return float(value)
 
 
@@ -156,7 +170,7 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
         raise InputError(src, where + "kind", f"unknown object kind {kind!r} "
                          f"(known: {', '.join(OBJECT_KINDS)})")
     position = _vector(raw["position"], 3, src, where + "position")
-    yaw = _number(raw.get("yaw", 0.0), src, where + "yaw")
+    yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
     if kind == "box":
         for key in ("radius", "height"):
             if key in raw:
@@ -235,28 +249,87 @@ def scene_from_dict(data: Mapping[str, Any], source: str = "<scene>",
     settings_raw = data.get("settings", {})
     if not isinstance(settings_raw, Mapping):
         raise InputError(src, "settings", "must be a table")
+    settings_raw = flatten_settings(settings_raw, src, "settings.")  # bare dotted names too
     DEFAULTS.with_overrides(settings_raw, src, "settings.")  # validates every key and value
-    scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), dict(settings_raw),
+    scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), settings_raw,
                   description, src)
     if check_geometry:
         from .intersect import check_bodies_apart
         from .templates import resolve_tasks  # templates need the scene model: import late
 
-        resolve_tasks(scene, scene.settings())
+        spaces = resolve_tasks(scene, scene.settings())
         check_bodies_apart(scene)
+        _warn_legal_oddities(scene, spaces)
     return scene
 
 
-def load_scene(path: str | Path) -> Scene:
+class SceneWarning(UserWarning):
+    """Legal but probably unintended scene content (shown once per scene and message)."""
+
+
+def _warn_legal_oddities(scene: Scene, spaces) -> None:
+    """Two things a scene may hold that are legal but rarely meant (SPEC is silent):
+    identical tasks on one object, whose spaces coincide so that every rollout towards
+    either is ambiguous; and a handle grasp point inside another object's body."""
+    import warnings
+
+    from .templates import object_body
+
+    seen: dict[tuple, str] = {}
+    for t in scene.tasks:
+        key = (t.object, t.template, tuple(sorted(t.bounds.items())),
+               tuple(sorted(t.fixed.items())))
+        if key in seen:
+            warnings.warn(SceneWarning(
+                f"{scene.source}: tasks[{t.id}]: same object, template, bounds and fixed "
+                f"dimensions as task {seen[key]!r}: their spaces coincide, so every rollout "
+                "towards either ends ambiguous"), stacklevel=3)
+        seen.setdefault(key, t.id)
+    for t, sp in zip(scene.tasks, spaces, strict=True):
+        if t.template != "handle_grasp":
+            continue
+        g = np.asarray(sp.shape().center)  # the cone's apex is the grasp point
+        for o in scene.objects:
+            if o.id != t.object and _inside(object_body(o), g):
+                warnings.warn(SceneWarning(
+                    f"{scene.source}: tasks[{t.id}]: the handle grasp point "
+                    f"{np.round(g, 4).tolist()} lies inside object {o.id!r}"), stacklevel=3)
+
+
+def _inside(body, p) -> bool:
+    """Whether point ``p`` lies inside a body shape (cylinder or box)."""
+    local = body.rotation.T @ (np.asarray(p) - np.asarray(body.center))
+    a, b, c = body.dims
+    if body.kind == "box":
+        return bool(np.all(np.abs(local) <= np.array([a, b, c])))
+    return bool(local[0] ** 2 + local[1] ** 2 <= a * a and abs(local[2]) <= b / 2)
+
+
+def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
+    """Parse a TOML file; anything that is not one (missing, a folder, unreadable, not
+    UTF-8 text, bad syntax) is an InputError naming the file, never a traceback."""
     path = Path(path)
     try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
+        return tomllib.loads(path.read_bytes().decode("utf-8"))
     except FileNotFoundError:
-        raise InputError(path, "<file>", "no such file") from None
+        raise InputError(path, "<file>", f"no such file (expected {what})") from None
+    except IsADirectoryError:
+        raise InputError(path, "<file>", f"is a folder, expected {what}") from None
+    except NotADirectoryError:
+        raise InputError(path, "<file>", "a part of the path is a file, not a folder") from None
+    except PermissionError:
+        raise InputError(path, "<file>", "cannot be read (permission denied)") from None
+    except OSError as e:
+        raise InputError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
+    except UnicodeDecodeError as e:
+        raise InputError(path, "<file>", f"is not UTF-8 text (byte {e.start}); expected "
+                         f"{what}") from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
-    return scene_from_dict(data, str(path))
+
+
+def load_scene(path: str | Path) -> Scene:
+    return scene_from_dict(read_toml(path, "a scene TOML file"), str(path))
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -34,72 +34,153 @@ class SettingSpec:
     rule: str
     check: Callable[[Any], bool]
     choices: tuple[str, ...] = ()
+    doc: str = ""  # one line of meaning, shown by `shacc settings`
 
 
-def _pos(x: float) -> bool:
-    return x > 0
+# Ranges (issue: inputs past the numeric ranges). Every number has a finite range, so
+# that nothing downstream overflows or divides by a rounding error: integers the JAX side
+# stores as int32 stay below 2^31, lengths stay within LENGTH_LIMIT (coordinates within
+# COORD_LIMIT of the origin, in scene.py), and a start grid within MAX_STARTS poses.
+INT32_MAX = 2**31 - 1
+LENGTH_LIMIT = 10.0       # m: any size of an object, a space, a margin or the gripper
+COORD_LIMIT = 100.0       # m: positions and the start plane, from the origin
+MAX_STARTS = 1 << 24      # start poses of one grid (16.7 M)
+MAX_GRID_SIDE = 1 << 16
 
 
-def _nonneg(x: float) -> bool:
-    return x >= 0
+def _range(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False):
+    """(rule text, check) for a number in [lo, hi] (open ends where asked)."""
+    def fmt(v: float) -> str:
+        return str(int(v)) if float(v).is_integer() else f"{v:g}"
+    rule = f"must be in {'(' if lo_open else '['}{fmt(lo)}, {fmt(hi)}{')' if hi_open else ']'}"
 
+    def check(x: float) -> bool:
+        return (lo < x if lo_open else lo <= x) and (x < hi if hi_open else x <= hi)
+    return rule, check
+
+
+def _spec(name: str, default: Any, kind: str, stage: str, rng: tuple, choices=()):
+    return SettingSpec(name, default, kind, stage, rng[0], rng[1], tuple(choices))
+
+
+def _choice(*options: str) -> tuple:
+    return f"must be one of {', '.join(options)}", lambda x: True
+
+
+_POS_LEN = _range(0, LENGTH_LIMIT, lo_open=True)
+_NONNEG_LEN = _range(0, LENGTH_LIMIT)
+_HALF_ANGLE = ("must be in (0, pi/2)", lambda x: 0 < x < math.pi / 2)
+_GRID = (f"must be two integers in [1, {MAX_GRID_SIDE}] with n_y * n_z <= {MAX_STARTS}",
+         lambda x: 1 <= x[0] <= MAX_GRID_SIDE and 1 <= x[1] <= MAX_GRID_SIDE
+         and x[0] * x[1] <= MAX_STARTS)
+_Z_RANGE = (f"must be two numbers [low, high] in [-{COORD_LIMIT:g}, {COORD_LIMIT:g}] with "
+            "low <= high", lambda x: -COORD_LIMIT <= x[0] <= x[1] <= COORD_LIMIT)
 
 _SPECS: list[SettingSpec] = [
-    SettingSpec("shrink_step", 0.05, "float", "precompute", "must be in (0, 1]",
-                lambda x: 0 < x <= 1),
-    SettingSpec("shrink_max_iter", 1000, "int", "precompute", "must be >= 1", lambda x: x >= 1),
-    SettingSpec("dt", 0.02, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("v_max", 0.15, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("omega_max", 3.0, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("max_steps", 600, "int", "rollout", "must be >= 1", lambda x: x >= 1),
-    SettingSpec("activation_tol", 1e-4, "float", "rollout", "must be >= 0", _nonneg),
-    SettingSpec("ambiguity", "fail", "choice", "rollout", "must be one of fail, nearest",
-                lambda x: True, ("fail", "nearest")),
-    SettingSpec("start_grid", (6, 6), "int_pair", "starts", "must be two integers >= 1",
-                lambda x: x[0] >= 1 and x[1] >= 1),
-    SettingSpec("start_plane_offset", 0.45, "float", "starts", "must be > 0", _pos),
-    SettingSpec("start_y_halfwidth", 0.45, "float", "starts", "must be >= 0", _nonneg),
-    SettingSpec("start_z_range", (0.02, 0.30), "float_pair", "starts",
-                "must be two numbers [low, high] with low <= high", lambda x: x[0] <= x[1]),
-    SettingSpec("start_orientation", "random", "choice", "starts",
-                "must be one of random, forward", lambda x: True, ("random", "forward")),
-    SettingSpec("seed", 0, "int", "starts", "must be >= 0", _nonneg),
-    SettingSpec("collision", "off", "choice", "rollout", "must be one of off, mjx",
-                lambda x: True, ("off", "mjx")),
+    # At most ceil(1 / sigma) passes: the lower bound keeps that to a thousand.
+    _spec("shrink_step", 0.05, "float", "precompute", _range(1e-3, 1)),
+    _spec("shrink_max_iter", 1000, "int", "precompute", _range(1, 10**6)),
+    _spec("dt", 0.02, "float", "rollout", _range(0, 10, lo_open=True)),
+    _spec("v_max", 0.15, "float", "rollout", _range(0, 100, lo_open=True)),
+    _spec("omega_max", 3.0, "float", "rollout", _range(0, 1000, lo_open=True)),
+    _spec("max_steps", 600, "int", "rollout", _range(1, 10**9)),
+    _spec("activation_tol", 1e-4, "float", "rollout", _range(0, 1)),
+    _spec("ambiguity", "fail", "choice", "rollout", _choice("fail", "nearest"),
+          ("fail", "nearest")),
+    _spec("start_grid", (6, 6), "int_pair", "starts", _GRID),
+    _spec("start_plane_offset", 0.45, "float", "starts", _range(0, COORD_LIMIT, lo_open=True)),
+    _spec("start_y_halfwidth", 0.45, "float", "starts", _range(0, COORD_LIMIT)),
+    _spec("start_z_range", (0.02, 0.30), "float_pair", "starts", _Z_RANGE),
+    _spec("start_orientation", "random", "choice", "starts", _choice("random", "forward"),
+          ("random", "forward")),
+    _spec("seed", 0, "int", "starts", _range(0, INT32_MAX)),
+    _spec("collision", "off", "choice", "rollout", _choice("off", "mjx"), ("off", "mjx")),
     # The gripper of collision = "mjx" (SPEC section 12b): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
-    SettingSpec("gripper.finger_length", 0.05, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("gripper.finger_radius", 0.008, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("gripper.opening", 0.10, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("gripper.palm_radius", 0.015, "float", "rollout", "must be > 0", _pos),
-    SettingSpec("mesh_sections", 32, "int", "precompute", "must be >= 8", lambda x: x >= 8),
-    SettingSpec("entropy_variant", "formula", "choice", "precompute",
-                "must be one of formula, reference_code", lambda x: True,
-                ("formula", "reference_code")),
-    SettingSpec("bootstrap_resamples", 10000, "int", "analysis", "must be >= 100",
-                lambda x: x >= 100),
+    _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
+    _spec("gripper.finger_radius", 0.008, "float", "rollout", _range(0, 1, lo_open=True)),
+    _spec("gripper.opening", 0.10, "float", "rollout", _range(0, 1, lo_open=True)),
+    _spec("gripper.palm_radius", 0.015, "float", "rollout", _range(0, 1, lo_open=True)),
+    _spec("mesh_sections", 32, "int", "precompute", _range(8, 1024)),
+    _spec("entropy_variant", "formula", "choice", "precompute",
+          _choice("formula", "reference_code"), ("formula", "reference_code")),
+    _spec("bootstrap_resamples", 10000, "int", "analysis", _range(100, 10**7)),
     # Template defaults (SPEC section 3's table).
-    SettingSpec("side_grasp.radius_init", 0.20, "float", "precompute", "must be > 0", _pos),
-    SettingSpec("side_grasp.radius_margin", 0.05, "float", "precompute", "must be >= 0", _nonneg),
-    SettingSpec("side_grasp.height_margin", 0.05, "float", "precompute", "must be >= 0", _nonneg),
-    SettingSpec("handle_grasp.length_init", 0.30, "float", "precompute", "must be > 0", _pos),
-    SettingSpec("handle_grasp.length_min", 0.10, "float", "precompute", "must be > 0", _pos),
+    _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN),
+    _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN),
+    _spec("side_grasp.height_margin", 0.05, "float", "precompute", _NONNEG_LEN),
+    _spec("handle_grasp.length_init", 0.30, "float", "precompute", _POS_LEN),
+    _spec("handle_grasp.length_min", 0.10, "float", "precompute", _POS_LEN),
     # 30 and 10 degrees exactly; SPEC writes them rounded as 0.5236 and 0.1745.
-    SettingSpec("handle_grasp.half_angle_init", math.radians(30.0), "float", "precompute",
-                "must be in (0, pi/2)", lambda x: 0 < x < math.pi / 2),
-    SettingSpec("handle_grasp.half_angle_min", math.radians(10.0), "float", "precompute",
-                "must be in (0, pi/2)", lambda x: 0 < x < math.pi / 2),
-    SettingSpec("handle_grasp.handle_offset", 0.03, "float", "precompute", "must be >= 0",
-                _nonneg),
-    SettingSpec("top_grasp.radius_init", 0.15, "float", "precompute", "must be > 0", _pos),
-    SettingSpec("top_grasp.radius_margin", 0.02, "float", "precompute", "must be >= 0", _nonneg),
-    SettingSpec("top_grasp.offset", 0.10, "float", "precompute", "must be >= 0", _nonneg),
-    SettingSpec("top_grasp.thickness", 0.04, "float", "precompute", "must be > 0", _pos),
-    SettingSpec("drawer_pull.depth_init", 0.25, "float", "precompute", "must be > 0", _pos),
-    SettingSpec("drawer_pull.depth_min", 0.08, "float", "precompute", "must be > 0", _pos),
+    _spec("handle_grasp.half_angle_init", math.radians(30.0), "float", "precompute",
+          _HALF_ANGLE),
+    _spec("handle_grasp.half_angle_min", math.radians(10.0), "float", "precompute",
+          _HALF_ANGLE),
+    _spec("handle_grasp.handle_offset", 0.03, "float", "precompute", _NONNEG_LEN),
+    _spec("top_grasp.radius_init", 0.15, "float", "precompute", _POS_LEN),
+    _spec("top_grasp.radius_margin", 0.02, "float", "precompute", _NONNEG_LEN),
+    _spec("top_grasp.offset", 0.10, "float", "precompute", _NONNEG_LEN),
+    _spec("top_grasp.thickness", 0.04, "float", "precompute", _POS_LEN),
+    _spec("drawer_pull.depth_init", 0.25, "float", "precompute", _POS_LEN),
+    _spec("drawer_pull.depth_min", 0.08, "float", "precompute", _POS_LEN),
 ]
 
+# One line of meaning per setting (SPEC sections 3, 5, 7, 9, 10, 12b and 16).
+_DOCS = {
+    "shrink_step": "Shrinking's step: the fraction of its range a space loses per pass (sigma)",
+    "shrink_max_iter": "most Shrinking passes",
+    "dt": "Automaton time step, s",
+    "v_max": "the simulated user's speed towards its task's space, m/s",
+    "omega_max": "the arm's rotation limit while the meta skill turns the gripper, rad/s",
+    "max_steps": "steps before a rollout ends as a timeout (T_max)",
+    "activation_tol": "a skill activates when the gripper is within this of its space, m",
+    "ambiguity": "several spaces at once: fail (ambiguous) or nearest (activate the closest)",
+    "start_grid": "start poses on the start plane: [n_y, n_z]",
+    "start_plane_offset": "start plane's distance in front of the frontmost object, m",
+    "start_y_halfwidth": "start plane's half width around the objects' mean y, m",
+    "start_z_range": "start plane's height band [low, high], m",
+    "start_orientation": "start orientations: random (seeded) or forward (approach +x)",
+    "seed": "seed of the random start orientations",
+    "collision": "gripper collision checking: off, or mjx (MuJoCo MJX)",
+    "gripper.finger_length": "collision gripper: finger capsule length, m",
+    "gripper.finger_radius": "collision gripper: finger capsule radius, m",
+    "gripper.opening": "collision gripper: distance between the finger axes, m",
+    "gripper.palm_radius": "collision gripper: palm capsule radius, m",
+    "mesh_sections": "sections of the meshes used for the clutteredness booleans",
+    "entropy_variant": "entropic clutteredness h: formula (paper) or reference_code",
+    "bootstrap_resamples": "resamples of the bootstrap confidence intervals",
+    "side_grasp.radius_init": "side grasp cylinder's initial radius, m",
+    "side_grasp.radius_margin": "side grasp's smallest radius is object radius + this, m",
+    "side_grasp.height_margin": "side grasp cylinder reaches this far above the object, m",
+    "handle_grasp.length_init": "handle grasp cone's initial length, m",
+    "handle_grasp.length_min": "handle grasp cone's smallest length, m",
+    "handle_grasp.half_angle_init": "handle grasp cone's initial half-angle, rad",
+    "handle_grasp.half_angle_min": "handle grasp cone's smallest half-angle, rad",
+    "handle_grasp.handle_offset": "handle grasp point's distance outside the cup's wall, m",
+    "top_grasp.radius_init": "top grasp disk's initial radius, m",
+    "top_grasp.radius_margin": "top grasp's smallest radius is object radius + this, m",
+    "top_grasp.offset": "top grasp disk's centre height above the object's top, m",
+    "top_grasp.thickness": "top grasp disk's thickness, m",
+    "drawer_pull.depth_init": "drawer pull box's initial depth out from the face, m",
+    "drawer_pull.depth_min": "drawer pull box's smallest depth, m",
+}
+_SPECS = [replace(s, doc=_DOCS[s.name]) for s in _SPECS]
+
 SPECS: Mapping[str, SettingSpec] = MappingProxyType({s.name: s for s in _SPECS})
+
+
+def describe() -> list[dict[str, str]]:
+    """Every setting as a row (name, default, type, rule, stage, meaning): what
+    ``shacc settings`` prints."""
+    kinds = {"float": "number", "int": "integer", "choice": "one of",
+             "int_pair": "[int, int]", "float_pair": "[number, number]"}
+    rows = []
+    for s in _SPECS:
+        default = list(s.default) if isinstance(s.default, tuple) else s.default
+        rows.append({"name": s.name, "default": str(default),
+                     "type": kinds[s.kind] + (" " + "|".join(s.choices) if s.choices else ""),
+                     "rule": s.rule, "stage": s.stage, "meaning": s.doc})
+    return rows
 
 # Object dimensions (SPEC section 3): per-object fields of a scene file, not settings,
 # but defaults all the same, so they live here too.
@@ -168,6 +249,38 @@ def parse_cli_value(name: str, text: str) -> Any:
         raise InputError("<--set>", name, f"must be a number, got {text!r}") from None
 
 
+def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
+                     prefix: str = "") -> dict[str, Any]:
+    """A settings table with TOML's nested form of dotted names made flat.
+
+    ``side_grasp.radius_init = 0.18`` written bare is read by TOML as the table
+    ``{"side_grasp": {"radius_init": 0.18}}``; quoted, as the key
+    ``"side_grasp.radius_init"``. Both mean one setting (SPEC section 16), so every
+    reader of a settings table (scenes, sweep axes, points and fixed settings) calls
+    this first. Both forms of one name in one table are an error, not a silent pick.
+    Names are not checked here: the caller's validation sees the full dotted name, so
+    an unknown name inside a nested table is reported as, e.g., ``side_grasp.foo``.
+    """
+    out: dict[str, Any] = {}
+
+    def walk(t: Mapping[str, Any], stem: str) -> None:
+        for key, value in t.items():
+            name = f"{stem}{key}"
+            if isinstance(value, Mapping):
+                walk(value, name + ".")
+            elif name in out:
+                raise InputError(source, prefix + name, "given twice (once quoted, once as a "
+                                 "nested table); write it once")
+            else:
+                out[name] = value
+
+    if not isinstance(table, Mapping):
+        raise InputError(source, prefix.rstrip(".") or "<settings>",
+                         "must be a table of setting = value")
+    walk(table, "")
+    return out
+
+
 class Settings(Mapping[str, Any]):
     """An immutable, validated set of every setting of SPEC section 16."""
 
@@ -183,10 +296,11 @@ class Settings(Mapping[str, Any]):
                        prefix: str = "") -> Settings:
         """A new Settings with ``overrides`` validated; errors name ``source`` and the key."""
         new = dict(self._values)
-        for name, value in overrides.items():
+        for name, value in flatten_settings(overrides, source, prefix).items():
             spec = SPECS.get(name)
             if spec is None:
-                raise InputError(source, prefix + name, "unknown setting (SPEC section 16 names)")
+                raise InputError(source, prefix + name,
+                                 "unknown setting (`shacc settings` lists them)")
             new[name] = _coerce(spec, value, source, prefix + name)
         out = Settings.__new__(Settings)
         out._values = MappingProxyType(new)

@@ -1,10 +1,13 @@
 # %% [markdown]
-# # What do the Automaton's speed and the Shrinking step change?
+# # How do the task spaces' initial size and the ambiguity rule change success?
 #
 # Loads a sweep's Parquet tables (by default it runs a small sweep first: 8 random
-# scenes x 3 speeds x 2 shrink steps on a 3 x 3 start grid) and plots success rate and
-# delta_R against each swept setting per mode, with bootstrap CIs over scenes, and a
-# heat map for the two-axis grid.
+# scenes x 4 initial side-grasp radii x 2 ambiguity rules on a 4 x 4 start grid; set
+# SHACC_SWEEP to a finished sweep's folder, e.g. the laptop sweep's) and plots success
+# rate and delta_R against each swept setting per mode, with bootstrap CIs over scenes,
+# and heat maps over the first two axes: larger initial spaces overlap more, so the
+# baseline loses success as the radius grows, unless ambiguous activations go to the
+# nearest task; Shrinking and ShaCC keep most of it.
 
 # %%
 import os
@@ -28,10 +31,11 @@ kind = "random"
 count = 8
 tasks = [5, 8]
 seed = 3
+[settings]
+start_grid = [4, 4]
 [axes]
-v_max = [0.1, 0.15, 0.3]
-shrink_step = [0.05, 0.2]
-start_grid = [[3, 3]]
+side_grasp.radius_init = [0.10, 0.14, 0.18, 0.22]
+ambiguity = ["fail", "nearest"]
 """)
     run_sweep(load_config(tmp / "small.toml"), tmp / "out", tmp / "cache", workers=1,
               progress=False)
@@ -52,7 +56,8 @@ for axis in axes:
 
 # %%
 if len(axes) >= 2:
-    sweep_heatmap(scenes, axes[0], axes[1], "success", "shacc")
+    for mode in modes:
+        sweep_heatmap(scenes, axes[0], axes[1], "success", mode)
     sweep_heatmap(scenes, axes[0], axes[1], "delta_R_mean", "shacc")
 
 # %%

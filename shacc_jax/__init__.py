@@ -2,9 +2,16 @@
 the Automaton, batched in one jitted evaluation. Reads only the bake's arrays
 (never imports trimesh, manifold3d or coal)."""
 
+import jax
+
 from .evaluation import evaluate, evaluate_on_devices, evaluate_sharded
+from .metrics import batch_metrics as _batch_metrics
 from .montecarlo import clutteredness_mc
 from .types import MODES, OUTCOMES, Evaluation, Rollouts, SceneMetrics, Scenes, Spaces
 
+# Per-scene metrics of rollouts joined from pieces (sweeps.memory), as one program.
+batch_metrics = jax.jit(_batch_metrics)
+
 __all__ = ["MODES", "OUTCOMES", "Evaluation", "Rollouts", "SceneMetrics", "Scenes", "Spaces",
-           "clutteredness_mc", "evaluate", "evaluate_on_devices", "evaluate_sharded"]
+           "batch_metrics", "clutteredness_mc", "evaluate", "evaluate_on_devices",
+           "evaluate_sharded"]

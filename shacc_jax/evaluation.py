@@ -30,9 +30,9 @@ from jaxtyping import Array
 
 from . import automaton as am
 from . import collision as col
-from . import shapes
+from . import program_cache, shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions, yaw_only
-from .metrics import scene_metrics
+from .metrics import batch_metrics
 from .types import COLLISION, INVALID, MODES, Evaluation, Rollouts, SceneMetrics, Scenes
 
 
@@ -294,6 +294,9 @@ def _yaw_scenes(scenes: Scenes) -> tuple[Array, Array]:
                                          jnp.asarray(scenes.cluster), is_yaw)
 
 
+_yaw_scenes_jit = jax.jit(_yaw_scenes)
+
+
 def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
     """SPEC section 9's ``collision`` outcome where the gripper penetrated an object at
     sample ``hit`` (at or before the activation sample)."""
@@ -342,9 +345,14 @@ def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int, chunk: in
             r, meta_steps = r0, no_meta
         per_mode.append(jax.vmap(_assemble)(scenes, out, r, meta_steps))
     rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)
-    metrics = jax.vmap(jax.vmap(scene_metrics, (0, 0, None)))(
-        rollouts.outcome, rollouts.delta_R, scenes.task_mask)
-    return Evaluation(rollouts, SceneMetrics(*metrics))
+    return Evaluation(rollouts, batch_metrics(rollouts.outcome, rollouts.delta_R,
+                                              scenes.task_mask))
+
+
+# The structure of _evaluate's output (for the exported program cache, which stores
+# flat leaves).
+_EVALUATION_STRUCTURE = Evaluation(Rollouts(*[0] * len(Rollouts._fields)),
+                                   SceneMetrics(*[0] * len(SceneMetrics._fields)))
 
 
 def default_block_size() -> int:
@@ -368,7 +376,8 @@ def evaluate(scenes, modes=MODES, block_size: int | None = None) -> Evaluation:
     block = default_block_size() if block_size is None else int(block_size)
     if block < 1:
         raise ValueError(f"block_size must be >= 1, got {block}")
-    return _evaluate(scenes, _check_modes(modes), block, **static_layout(scenes))
+    static = {"modes": _check_modes(modes), "block_size": block, **static_layout(scenes)}
+    return program_cache.call("evaluate", _evaluate, static, scenes, _EVALUATION_STRUCTURE)
 
 
 def static_layout(scenes: Scenes) -> dict:
@@ -379,7 +388,9 @@ def static_layout(scenes: Scenes) -> dict:
 
     collide = bool(np.asarray(scenes.collision).any())
     boxes = collide and bool(np.asarray(scenes.obj_mask & (scenes.obj_kind == col.BOX)).any())
-    yaw = np.asarray(_yaw_scenes(scenes)[1])
+    # One compiled program, not op-by-op dispatch: eagerly, these few lines were about
+    # 40 small programs, each compiled (or loaded from the persistent cache) on first use.
+    yaw = np.asarray(_yaw_scenes_jit(scenes)[1])
     meta = "yaw" if yaw.all() else "general" if not yaw.any() else "both"
     return {"collide": collide, "boxes": boxes, "meta": meta}
 

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .types import OUTCOMES, SUCCESS
+from .types import OUTCOMES, SUCCESS, SceneMetrics
 
 
 def scene_metrics(outcome: Int[Array, "N T"], delta_r: Float[Array, "N T"],
@@ -22,3 +23,10 @@ def scene_metrics(outcome: Int[Array, "N T"], delta_r: Float[Array, "N T"],
                         jnp.nan)
     counts = jnp.stack([jnp.sum(valid & (outcome == c)) for c in range(len(OUTCOMES))])
     return u.astype(delta_r.dtype), mean_dr, counts.astype(jnp.int32), n.astype(jnp.int32)
+
+
+def batch_metrics(outcome: Int[Array, "S M N T"], delta_r: Float[Array, "S M N T"],
+                  task_mask: Bool[Array, "S T"]) -> SceneMetrics:
+    """:func:`scene_metrics` of every scene and mode of a batch."""
+    return SceneMetrics(*jax.vmap(jax.vmap(scene_metrics, (0, 0, None)))(
+        outcome, delta_r, task_mask))

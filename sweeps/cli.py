@@ -1,90 +1,192 @@
 """The ``shacc`` command line: a thin layer over the library.
 
-Bad input (a scene file, a ``--set``) prints one line naming the file, the
+Every command and its arguments are declared here, in one place; each command's
+code lives in its own module and is imported only when that command runs, so
+``shacc precompute`` never imports JAX and every command starts without paying for
+the others' libraries (matplotlib, pandas, MuJoCo: about a second together).
+
+Bad input (a scene file, a ``--set``, a path) prints one line naming the file, the
 field and the rule, and exits with status 2; nothing is written.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import os
 import sys
-import time
+import warnings
 from collections.abc import Sequence
 
 from geometry_precompute import InputError
+from geometry_precompute.scene import SceneWarning
 
-from .evaluate_cmd import add_evaluate
-from .output import precompute_json, write_json
-from .pipeline import load_and_precompute
-from .render import add_render
-from .reproduce import add_reproduce
-from .runner import add_sweep
+from . import compile_cache
 
-
-def _fmt_params(space, q) -> str:
-    parts = []
-    for name, lo, hi, v in zip(space.param_names, space.q_min, space.q_init, q, strict=True):
-        parts.append(f"{name} [{lo:.4g}, {hi:.4g}] -> {v:.4g}")
-    return "; ".join(parts)
+# The modes a command may be asked for (shacc_jax.MODES; a test keeps them equal,
+# so that parsing the command line does not import JAX).
+MODES = ("baseline", "shrinking", "shacc")
 
 
-def print_precompute(r, wall: float) -> None:
-    ids = r.task_ids
-    print(f"scene: {r.scene.name}  ({r.scene.source})")
-    if r.scene.description:
-        print(f"  {r.scene.description}")
-    print(f"tasks ({len(ids)}):")
-    w = max(len(i) for i in ids)
-    for k, (sp, q) in enumerate(zip(r.spaces, r.q_opt, strict=True)):
-        print(f"  {k:2d} {ids[k]:<{w}}  {sp.template:<12} on {sp.obj.id} ({sp.obj.kind})  "
-              f"{_fmt_params(sp, q)}")
-    print(f"C_init   {r.C_init:.4f}")
-    print(f"C_final  {r.C_final:.4f}")
-    meta = r.meta_clusters()
-    print("clusters: " + ("none" if not meta else
-                          "  ".join("[" + ", ".join(ids[i] for i in c) + "]" for c in meta)))
-    still = ", ".join(f"{ids[i]}~{ids[j]}" for i, j in r.still_intersecting) or "none"
-    print(f"shrinking: {r.iterations} iterations; still intersecting at bounds: {still}")
-    print(f"d = {r.d:.4f} m   h = {r.h:.4f} ({r.settings['entropy_variant']})")
-    sec = r.seconds
-    parts = ", ".join(f"{k} {1e3 * v:.2f}" for k, v in sec.items() if k != "total")
-    print(f"time: {1e3 * sec['total']:.2f} ms ({parts}); with loading {1e3 * wall:.1f} ms")
+def _add_set(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a setting, e.g. v_max=0.3 or side_grasp.radius_init=0.18 "
+                   "(may be repeated; `shacc settings` lists every name with its default, "
+                   "type and valid range)")
 
 
-def cmd_precompute(args) -> int:
-    t0 = time.perf_counter()
-    r = load_and_precompute(args.scene, args.set)
-    wall = time.perf_counter() - t0
-    print_precompute(r, wall)
-    if args.json:
-        write_json(args.json, precompute_json(r))
-        print(f"wrote {args.json}")
-    return 0
+class _Help(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default, except where there is none to show."""
+
+    def _get_help_string(self, action):
+        if action.default in (None, False, [], argparse.SUPPRESS) or action.required:
+            return action.help
+        return super()._get_help_string(action)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Errors in one line, like every other bad input (SPEC section 13)."""
+
+    def error(self, message: str):
+        print(f"error: <arguments>: {self.prog}: {message} (see {self.prog} --help)",
+              file=sys.stderr)
+        sys.exit(2)
+
+
+def _int_in(lo: int, hi: int | None = None):
+    """An argparse type: an integer within [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if v < lo or (hi is not None and v > hi):
+            rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+            raise argparse.ArgumentTypeError(f"must be an integer {rng}, got {v}")
+        return v
+    return parse
+
+
+def _version() -> str:
+    import importlib.metadata as md
+
+    try:
+        return md.version("shacc")
+    except md.PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="shacc", description="ShaCC batch evaluator")
+    p = _Parser(prog="shacc", description="ShaCC batch evaluator. Settings and their "
+                "defaults: `shacc settings`.", formatter_class=_Help)
+    p.add_argument("--version", action="version", version=f"shacc {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
-    pre = sub.add_parser("precompute", help="C, clusters and Shrinking of one scene")
-    pre.add_argument("scene", help="scene TOML file")
-    pre.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                     help="override a setting (SPEC section 16 names)")
-    pre.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
-    pre.set_defaults(func=cmd_precompute)
-    add_evaluate(sub)
-    add_reproduce(sub)
-    add_sweep(sub)
-    add_render(sub)
+    _sub = sub.add_parser
+
+    def add_parser(*a, **kw):
+        return _sub(*a, formatter_class=_Help, **kw)
+
+    sub.add_parser = add_parser
+
+    c = sub.add_parser("settings", help="list every setting: default, type, range, meaning")
+    c.add_argument("--json", action="store_true", help="as JSON (one object per setting)")
+    c.set_defaults(func="settings_cmd:cmd_settings")
+
+    c = sub.add_parser("precompute", help="C, clusters and Shrinking of one scene")
+    c.add_argument("scene", help="scene TOML file")
+    _add_set(c)
+    c.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
+    c.set_defaults(func="precompute_cmd:cmd_precompute")
+
+    c = sub.add_parser("evaluate", help="evaluate scenes in every mode, as one batch (SPEC 12a)")
+    c.add_argument("scene", nargs="+",
+                   help="scene TOML files, or folders of them (all evaluated as one batch)")
+    _add_set(c)
+    c.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES),
+                   help="modes to evaluate")
+    c.add_argument("--json", metavar="OUT.jsonl",
+                   help="write SPEC section 12a's object, one line per scene (JSON Lines)")
+    c.set_defaults(func="evaluate_cmd:cmd_evaluate")
+
+    c = sub.add_parser("reproduce", help="the paper's experiment: Fig. 6 and Fig. 7")
+    c.add_argument("--out", default="reproduce_out", help="output folder")
+    c.add_argument("--random-scenes", type=_int_in(0, 100_000), default=None,
+                   help="random scenes (default 20; 4 with --quick)")
+    c.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=0,
+                   help="seeds the random scenes and bootstrap")
+    c.add_argument("--quick", action="store_true",
+                   help="few random scenes, a coarse start grid, 200 bootstrap resamples")
+    c.add_argument("--field-grid", type=_int_in(2, 1024), default=None,
+                   help="start grid per side for Fig. 7 (default 64; 16 with --quick)")
+    _add_set(c)
+    c.add_argument("--workers", type=_int_in(1, 1024), default=None,
+                   help="precompute processes (default: one per CPU)")
+    c.add_argument("--readme", help="also rewrite the marked section of this README")
+    c.set_defaults(func="reproduce:cmd_reproduce")
+
+    c = sub.add_parser("sweep", help="a parameter sweep from a TOML config (resumable)")
+    c.add_argument("config", help="sweep config TOML")
+    c.add_argument("--out", help="output folder (resumes if it holds this sweep)")
+    c.add_argument("--dry-run", action="store_true", help="print sizes and estimates only")
+    c.add_argument("--cache", help="precompute cache folder (default ~/.cache/shacc/precompute)")
+    c.add_argument("--workers", type=_int_in(1, 1024), default=None,
+                   help="precompute processes (default: one per CPU)")
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.set_defaults(func="runner:cmd_sweep")
+
+    c = sub.add_parser("export-mjcf", help="write a scene as MJCF (loads in MuJoCo)")
+    c.add_argument("scene", help="scene TOML file")
+    c.add_argument("out", help="MJCF file to write")
+    _add_set(c)
+    c.set_defaults(func="render:cmd_export")
+
+    c = sub.add_parser("render", help="3-D MuJoCo picture beside the top-down view")
+    c.add_argument("scene", help="scene TOML file")
+    c.add_argument("--out", required=True, help="PNG file")
+    c.add_argument("--mode", default="shacc", choices=list(MODES),
+                   help="whose spaces to draw and roll out")
+    c.add_argument("--width", type=_int_in(64, 8192), default=1280,
+                   help="picture width in pixels")
+    c.add_argument("--height", type=_int_in(64, 8192), default=560,
+                   help="picture height in pixels")
+    c.add_argument("--path", type=int, nargs=2, metavar=("START", "TASK"),
+                   help="draw one rollout of --mode")
+    _add_set(c)
+    c.set_defaults(func="render:cmd_render")
     return p
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """A scene's warnings as one line each on stderr (Python's form adds a source line)."""
+    if issubclass(category, SceneWarning):
+        print(f"warning: {message}", file=sys.stderr)
+    else:
+        _default_showwarning(message, category, filename, lineno, file, line)
+
+
+_default_showwarning = warnings.showwarning
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
+    if args.command in ("evaluate", "reproduce", "sweep", "render"):
+        compile_cache.enable()
+    module, name = args.func.split(":")
     try:
-        return args.func(args)
+        func = getattr(importlib.import_module(f"{__package__}.{module}"), name)
+        return func(args)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Worker processes ignore SIGINT (sweeps.workers) and end with their pool.
+        print("interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader of stdout went away (`shacc settings | head`): not an error of ours.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

@@ -13,15 +13,20 @@ over any setting of SPEC section 16, validated in full before any work starts.
     seed = 0
     # ... or scene files:  kind = "files"; path = "scenes/" (relative to this file)
 
+    [settings]                                   # optional: fixed for every point
+    start_grid = [8, 8]
+
     [axes]                                       # grid product of the listed values
     v_max = [0.1, 0.15, 0.2]
     shrink_step = [0.05, 0.1]
+    side_grasp.radius_init = [0.15, 0.2]         # dotted names bare or quoted
 
     [[points]]                                   # and/or explicit points
     v_max = 0.3
 
 Points are the axes' grid product (in the order written, the last axis fastest)
-followed by the explicit points; with neither, the one point of the defaults.
+followed by the explicit points; with neither, the one point of the defaults. The
+``[settings]`` table is added to every point (a point's own value wins).
 """
 
 from __future__ import annotations
@@ -29,18 +34,22 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import shacc_jax
-from geometry_precompute import DEFAULTS, SPECS, InputError, load_scene, random_scene
-from geometry_precompute.scene import Scene, scene_to_dict
+import numpy as np
 
-_TOP = {"name", "modes", "chunk", "source", "axes", "points"}
+import shacc_jax
+from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene
+from geometry_precompute.generate import MAX_TASKS
+from geometry_precompute.scene import Scene, read_toml, scene_to_dict
+from geometry_precompute.settings import flatten_settings
+
+_TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points"}
 _RANDOM = {"kind", "count", "tasks", "sampling", "seed"}
+MAX_COUNT = 100_000_000  # random scenes in one sweep
 _FILES = {"kind", "path"}
 
 
@@ -62,6 +71,16 @@ class SweepConfig:
                  "both": ["uniform", "gaussian"]}[src["sampling"]]
         lo, hi = src["tasks"]
         return [random_scene(src["seed"] + i, kinds[i % len(kinds)], lo, hi)
+                for i in range(src["count"])]
+
+    def task_counts(self) -> list[int]:
+        """Task count of every scene, in order. Random scenes are not built: their task
+        count is the generator's first draw from its seed (``random_scene``)."""
+        src = self.source
+        if src["kind"] == "files":
+            return [len(s.tasks) for s in self.scenes()]
+        lo, hi = src["tasks"]
+        return [int(np.random.default_rng(src["seed"] + i).integers(lo, hi + 1))
                 for i in range(src["count"])]
 
     def resolved(self) -> dict:
@@ -94,13 +113,12 @@ def _int(v: Any, src: str, fld: str, lo: int = 0) -> int:
 
 
 def _check_point(point: Any, src: str, where: str) -> dict:
+    """A table of setting = value, its dotted names flat, every name and value valid."""
     if not isinstance(point, Mapping):
         raise InputError(src, where, "must be a table of setting = value")
-    for name in point:
-        if name not in SPECS:
-            raise InputError(src, f"{where}.{name}", "unknown setting (SPEC section 16 names)")
-    DEFAULTS.with_overrides(point, src, where + ".")  # validates each value
-    return dict(point)
+    point = flatten_settings(point, src, where + ".")
+    DEFAULTS.with_overrides(point, src, where + ".")  # validates each name and value
+    return point
 
 
 def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
@@ -127,12 +145,16 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         tasks = raw.get("tasks", [5, 10])
         if not (isinstance(tasks, list) and len(tasks) == 2
                 and all(isinstance(t, int) and not isinstance(t, bool) for t in tasks)
-                and 1 <= tasks[0] <= tasks[1]):
-            raise InputError(src, "source.tasks", "must be [min, max] with 1 <= min <= max")
+                and 1 <= tasks[0] <= tasks[1] <= MAX_TASKS):
+            raise InputError(src, "source.tasks", f"must be [min, max] with 1 <= min <= max "
+                             f"<= {MAX_TASKS} (the most objects the generator places)")
         sampling = raw.get("sampling", "both")
         if sampling not in ("uniform", "gaussian", "both"):
             raise InputError(src, "source.sampling", "must be uniform, gaussian or both")
-        source_out = {"kind": "random", "count": _int(raw.get("count"), src, "source.count", 1),
+        count = _int(raw.get("count"), src, "source.count", 1)
+        if count > MAX_COUNT:
+            raise InputError(src, "source.count", f"must be <= {MAX_COUNT}, got {count}")
+        source_out = {"kind": "random", "count": count,
                       "tasks": list(tasks), "sampling": sampling,
                       "seed": _int(raw.get("seed", 0), src, "source.seed")}
     elif raw["kind"] == "files":
@@ -150,9 +172,11 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     else:
         raise InputError(src, "source.kind", f"must be random or files, got {raw['kind']!r}")
 
+    fixed = _check_point(data.get("settings", {}), src, "settings")
     axes = data.get("axes", {})
     if not isinstance(axes, Mapping):
         raise InputError(src, "axes", "must be a table of setting = [values]")
+    axes = flatten_settings(axes, src, "axes.")
     for k, values in axes.items():
         if not isinstance(values, list) or not values:
             raise InputError(src, f"axes.{k}", "must be a non-empty list of values")
@@ -166,20 +190,24 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     points += [_check_point(p, src, f"points[{i}]") for i, p in enumerate(explicit)]
     if not points:
         points = [{}]
+    # The fixed settings hold for every point; a point's own value of one wins.
+    points = [{**fixed, **p} for p in points]
     cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir)
-    scenes = cfg.scenes()  # scene files are loaded (and validated) before any work starts
-    for p in points:
-        for s in scenes:
-            s.settings(DEFAULTS, p)  # a point against each scene's own [settings]
+    if source_out["kind"] == "files":
+        # Scene files are loaded (and validated) before any work starts, and each point
+        # against each scene's own [settings]. Random scenes have no [settings] of their
+        # own, so the points' checks above cover them without building any.
+        scenes = cfg.scenes()
+        for k, p in enumerate(points):
+            grids = {tuple(s.settings(DEFAULTS, p)["start_grid"]): s.source for s in scenes}
+            if len(grids) > 1:
+                raise InputError(src, "source.path", f"the scenes ask for different start "
+                                 f"grids {sorted(grids)} (point {k}); a point's scenes are "
+                                 "evaluated as one batch: set start_grid in the config's "
+                                 "[settings] or make the scenes agree")
     return cfg
 
 
 def load_config(path: str | Path) -> SweepConfig:
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(path, "<file>", "no such file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
-    return parse_config(data, str(path), path.parent)
+    return parse_config(read_toml(path, "a sweep config TOML file"), str(path), path.parent)

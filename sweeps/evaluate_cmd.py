@@ -1,18 +1,47 @@
-"""``shacc evaluate SCENE.toml``: one scene end to end, a readable summary and,
-with ``--json``, SPEC section 12a's object."""
+"""``shacc evaluate SCENE.toml [MORE.toml | FOLDER ...]``: scenes end to end in one
+batch (one compilation), a readable summary and, with ``--json``, SPEC section
+12a's object per scene.
+
+``--json OUT`` writes JSON Lines: one SPEC 12a object per line, one line per scene in
+the order evaluated. For one scene that file is also a plain JSON document.
+"""
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 
-import shacc_jax
+from geometry_precompute import InputError
 from shacc_jax.types import OUTCOMES
 
-from .output import write_json
-from .pipeline import evaluate_results, load_and_precompute, scene_json
+from .inputs import load_and_precompute
+from .output import announce, check_output_file, clean_json, human_output, write_output
+from .pipeline import evaluate_results, scene_json
+
+
+def scene_files(args: list[str]) -> list[Path]:
+    """Scene arguments as files: a folder stands for its ``*.toml`` files, sorted."""
+    out: list[Path] = []
+    for a in args:
+        p = Path(a)
+        if p.is_dir():
+            found = sorted(p.glob("*.toml"))
+            if not found:
+                raise InputError(p, "<folder>", "holds no *.toml scene files")
+            out += found
+        else:
+            out.append(p)
+    return out
+
+
+def _outcome_columns(results) -> int:
+    # The collision column only where collision checking is on for some scene.
+    return 5 if any(r.settings["collision"] != "off" for r in results) else 4
 
 
 def print_summary(ev, s: int = 0) -> None:
+    """One scene in detail: tasks, C, clusters, and a row per mode."""
     r = ev.results[s]
     ids = r.task_ids
     me = ev.evaluation.metrics
@@ -26,39 +55,54 @@ def print_summary(ev, s: int = 0) -> None:
                           "  ".join("[" + ", ".join(ids[i] for i in c) + "]" for c in meta)))
     n_starts = ev.baked.n_starts
     print(f"rollouts per mode: {int(me.n_rollouts[s, 0])} ({n_starts} starts x {len(ids)} tasks)")
-    # The collision column only where collision checking is on.
-    k = 5 if r.settings["collision"] != "off" else 4
-    head = f"{'mode':<10} {'rate':>8} " + " ".join(f"{o:>9}" for o in OUTCOMES[:k]) + \
-        f" {'mean dR (rad)':>14}"
+    print_table(ev, [s], with_scene=False)
+
+
+def print_table(ev, scenes: list[int], with_scene: bool = True) -> None:
+    """A row per (scene, mode): success rate, outcome counts, mean delta_R."""
+    me = ev.evaluation.metrics
+    k = _outcome_columns([ev.results[s] for s in scenes])
+    w = max([5] + [len(ev.results[s].scene.name) for s in scenes]) if with_scene else 0
+    head = (f"{'scene':<{w}} " if with_scene else "") + f"{'mode':<10} {'rate':>8} " + \
+        " ".join(f"{o:>9}" for o in OUTCOMES[:k]) + f" {'mean dR (rad)':>14}"
     print(head)
     print("-" * len(head))
-    for m, mode in enumerate(ev.modes):
-        counts = " ".join(f"{int(c):>9}" for c in me.outcome_counts[s, m, :k])
-        dr = me.delta_R_mean[s, m]
-        dr_txt = "n/a" if dr != dr else f"{dr:.3f}"
-        print(f"{mode:<10} {me.u_scene[s, m]:>8.3f} {counts} {dr_txt:>14}")
+    for s in scenes:
+        name = ev.results[s].scene.name
+        for m, mode in enumerate(ev.modes):
+            counts = " ".join(f"{int(c):>9}" for c in me.outcome_counts[s, m, :k])
+            dr = me.delta_R_mean[s, m]
+            dr_txt = "n/a" if dr != dr else f"{dr:.3f}"
+            lead = f"{name:<{w}} " if with_scene else ""
+            print(f"{lead}{mode:<10} {me.u_scene[s, m]:>8.3f} {counts} {dr_txt:>14}")
 
 
 def cmd_evaluate(args) -> int:
+    if len(set(args.modes)) != len(args.modes):
+        raise InputError("<arguments>", "--modes", f"each mode once, got {args.modes}")
+    if args.json and args.json != "-":
+        check_output_file(args.json, "--json")
+    paths = scene_files(args.scene)
     t0 = time.perf_counter()
-    r = load_and_precompute(args.scene, args.set)
+    results = [load_and_precompute(p, args.set) for p in paths]
     t1 = time.perf_counter()
-    ev = evaluate_results([r], args.modes)
-    print_summary(ev)
-    print(f"time: precompute {1e3 * (t1 - t0):.1f} ms, evaluation (with compilation) "
-          f"{ev.seconds['evaluate']:.2f} s")
+    counts = {int(r.settings["start_grid"][0] * r.settings["start_grid"][1]) for r in results}
+    if len(counts) > 1:
+        raise InputError(paths[0], "start_grid", "scenes evaluated together need one start "
+                         f"grid size, got {sorted(counts)} start poses; evaluate them apart "
+                         "or give --set start_grid=[NY,NZ]")
+    ev = evaluate_results(results, args.modes)
+    with human_output(args.json):
+        if len(results) == 1:
+            print_summary(ev)
+        else:
+            print(f"{len(results)} scenes, {ev.baked.n_starts} starts each, evaluated as "
+                  "one batch")
+            print_table(ev, list(range(len(results))))
+        print(f"time: precompute {1e3 * (t1 - t0):.1f} ms, evaluation (with compilation) "
+              f"{ev.seconds['evaluate']:.2f} s")
     if args.json:
-        write_json(args.json, scene_json(ev, 0))
-        print(f"wrote {args.json}")
+        lines = [json.dumps(clean_json(scene_json(ev, s))) for s in range(len(results))]
+        write_output(args.json, ("\n".join(lines) + "\n").encode())
+        announce(args.json)
     return 0
-
-
-def add_evaluate(sub) -> None:
-    p = sub.add_parser("evaluate", help="evaluate one scene in every mode (SPEC 12a)")
-    p.add_argument("scene", help="scene TOML file")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a setting (SPEC section 16 names)")
-    p.add_argument("--modes", nargs="+", default=list(shacc_jax.MODES),
-                   choices=list(shacc_jax.MODES))
-    p.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's JSON")
-    p.set_defaults(func=cmd_evaluate)

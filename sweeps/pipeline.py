@@ -7,39 +7,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import jax
 import numpy as np
 
 import shacc_jax
 from geometry_precompute import (
     BakedScenes,
-    InputError,
     PrecomputeResult,
     bake,
-    load_scene,
-    precompute,
 )
-from geometry_precompute.settings import parse_cli_value
 from shacc_jax.types import OUTCOMES, Evaluation
 
+from .memory import evaluate_in_pieces
 from .output import precompute_json
-
-
-def parse_sets(pairs: Sequence[str]) -> dict:
-    """``--set NAME=VALUE`` arguments as a dict of settings (validated later)."""
-    out = {}
-    for item in pairs:
-        if "=" not in item:
-            raise InputError("<--set>", item, "must be NAME=VALUE")
-        name, text = item.split("=", 1)
-        out[name.strip()] = parse_cli_value(name.strip(), text.strip())
-    return out
-
-
-def load_and_precompute(path: str, sets: Sequence[str]) -> PrecomputeResult:
-    """One scene file with ``--set`` overrides (SPEC section 16's precedence)."""
-    scene = load_scene(path)
-    return precompute(scene, scene.settings(overrides=parse_sets(sets)))
 
 
 @dataclass(frozen=True)
@@ -56,8 +35,7 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
-    ev = shacc_jax.evaluate(baked, tuple(modes))
-    ev = jax.tree.map(np.asarray, jax.block_until_ready(ev))
+    ev = evaluate_in_pieces(baked, tuple(modes), shacc_jax.evaluate)
     t2 = time.perf_counter()
     return Evaluated(list(results), baked, ev, tuple(modes),
                      {"bake": t1 - t0, "evaluate": t2 - t1})

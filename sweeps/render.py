@@ -22,8 +22,9 @@ import numpy as np
 from geometry_precompute import InputError
 from geometry_precompute.mjcf import scene_to_mjcf
 
-from .output import write_atomic
-from .pipeline import evaluate_results, load_and_precompute
+from .inputs import load_and_precompute
+from .output import check_output_file, write_atomic
+from .pipeline import evaluate_results
 
 SPACES_FOR_MODE = {"baseline": "init", "shrinking": "both", "shacc": "both"}
 
@@ -44,6 +45,9 @@ def render_array(result, width: int, height: int, spaces: str = "both",
     cam.elevation = -32.0
     option = mujoco.MjvOption()
     option.geomgroup[:3] = 1
+    # The offscreen framebuffer must hold the picture (the MJCF asks for 1920 x 1080).
+    model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
+    model.vis.global_.offheight = max(model.vis.global_.offheight, height)
     with mujoco.Renderer(model, height, width) as renderer:
         renderer.update_scene(data, cam, option)
         if path is not None:
@@ -104,6 +108,7 @@ def render_scene(result, out: Path, width: int = 1280, height: int = 560,
 
 
 def cmd_export(args) -> int:
+    check_output_file(args.out, "OUT")
     r = load_and_precompute(args.scene, args.set)
     write_atomic(args.out, scene_to_mjcf(r).encode())
     print(f"wrote {args.out}")
@@ -111,28 +116,9 @@ def cmd_export(args) -> int:
 
 
 def cmd_render(args) -> int:
-    if args.width < 64 or args.height < 64:
-        raise InputError("<arguments>", "--width/--height", "must be at least 64 pixels")
+    check_output_file(args.out, "--out")
     r = load_and_precompute(args.scene, args.set)
     render_scene(r, Path(args.out), args.width, args.height, args.mode,
                  tuple(args.path) if args.path else None)
     print(f"wrote {args.out}")
     return 0
-
-
-def add_render(sub) -> None:
-    e = sub.add_parser("export-mjcf", help="write a scene as MJCF (loads in MuJoCo)")
-    e.add_argument("scene")
-    e.add_argument("out")
-    e.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
-    e.set_defaults(func=cmd_export)
-    r = sub.add_parser("render", help="3-D MuJoCo picture beside the top-down view")
-    r.add_argument("scene")
-    r.add_argument("--out", required=True, help="PNG file")
-    r.add_argument("--mode", default="shacc", choices=list(SPACES_FOR_MODE))
-    r.add_argument("--width", type=int, default=1280)
-    r.add_argument("--height", type=int, default=560)
-    r.add_argument("--path", type=int, nargs=2, metavar=("START", "TASK"),
-                   help="draw one rollout of --mode")
-    r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
-    r.set_defaults(func=cmd_render)

@@ -13,11 +13,10 @@ each with a 95 % percentile-bootstrap CI over scenes.
 from __future__ import annotations
 
 import importlib.metadata as md
-import multiprocessing
+import os
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from tqdm import tqdm
 import shacc_jax
 from geometry_precompute import (
     DEFAULTS,
+    InputError,
     load_scene,
     precompute,
     random_scene,
@@ -33,9 +33,11 @@ from geometry_precompute import (
 )
 
 from . import plots
-from .output import write_atomic, write_json
-from .pipeline import evaluate_results, parse_sets
+from .inputs import parse_sets
+from .output import check_output_dir, check_output_file, write_atomic, write_json
+from .pipeline import evaluate_results
 from .stats import mean_ci, pearson_ci
+from .workers import precompute_pool
 
 MODES = shacc_jax.MODES
 CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos")
@@ -69,6 +71,11 @@ def _ratio(a, b):
     return None if a in (None, 0) or b is None else (b - a) / a
 
 
+def _log(*parts) -> None:
+    """Progress lines go to stderr: stdout is kept for results."""
+    print(*parts, file=sys.stderr, flush=True)
+
+
 def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         field_grid: int = 64, overrides: dict | None = None, workers: int | None = None,
         readme: Path | None = None) -> dict:
@@ -83,19 +90,19 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     randoms = [(seed + i, "uniform" if i % 2 == 0 else "gaussian") for i in range(n_random)]
     items = [("manual", p, dict(overrides or {})) for p in manual]
     items += [("random", r, dict(overrides or {})) for r in randoms]
-    print(f"reproduce: {len(manual)} manual + {n_random} random scenes, modes "
-          f"{', '.join(MODES)}", flush=True)
-    # spawn, not fork: forking a process in which JAX has started threads can deadlock.
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    _log(f"reproduce: {len(manual)} manual + {n_random} random scenes, modes "
+          f"{', '.join(MODES)}")
+    with precompute_pool(workers) as pool:
         results = list(tqdm(pool.map(_precompute_task, items), total=len(items),
-                            desc="precompute", unit="scene", file=sys.stdout))
+                            desc="precompute", unit="scene", file=sys.stderr,
+                            disable=None))
     t_pre = time.perf_counter()
-    print("evaluating all rollouts (compiles on first use)...", flush=True)
+    _log("evaluating all rollouts (compiles on first use)...")
     ev = evaluate_results(results, MODES, max_tasks=max(len(r.spaces) for r in results))
     me = ev.evaluation.metrics
     n_rollouts = int(me.n_rollouts.sum())
     t_eval = time.perf_counter()
-    print(f"  {n_rollouts} rollouts in {ev.seconds['evaluate']:.1f} s", flush=True)
+    _log(f"  {n_rollouts} rollouts in {ev.seconds['evaluate']:.1f} s")
 
     scenes = []
     for i, r in enumerate(results):
@@ -111,7 +118,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
                            "delta_R_mean": None if not np.isfinite(dr) else float(dr)}
         scenes.append(entry)
 
-    print("bootstrap confidence intervals...", flush=True)
+    _log("bootstrap confidence intervals...")
     u_base = np.array([s["baseline"]["u_scene"] for s in scenes])
     measures = {k: np.array([s[k] for s in scenes]) for k in ("C_init", "d", "h")}
     correlation = {("C" if k == "C_init" else k): pearson_ci(v, u_base, n_boot, seed)
@@ -139,7 +146,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         categories[c] = entry
     t_stats = time.perf_counter()
 
-    print(f"success fields on a {field_grid} x {field_grid} start grid...", flush=True)
+    _log(f"success fields on a {field_grid} x {field_grid} start grid...")
     field_idx = next(i for i, s in enumerate(scenes) if s["name"] == "mug-behind-two")
     fr = results[field_idx]
     field_settings = fr.settings.with_overrides({"start_grid": [field_grid, field_grid]})
@@ -158,7 +165,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
                      "statistics": t_stats - t_eval, "success_fields": t_field - t_stats},
         "rollouts": n_rollouts,
     }
-    print("figures and report...", flush=True)
+    _log("figures and report...")
     _figures(out, summary, scenes, measures, u_base, field, field_grid, fr)
     report = render_report(summary)
     write_atomic(out / "report.md", report.encode())
@@ -166,8 +173,8 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     write_json(out / "summary.json", summary)
     if readme is not None:
         update_readme(readme, out, summary)
-    print(f"wrote {out}/summary.json, report.md and figures in "
-          f"{summary['timing_s']['total']:.1f} s", flush=True)
+    _log(f"wrote {out}/summary.json, report.md and figures in "
+          f"{summary['timing_s']['total']:.1f} s")
     return summary
 
 
@@ -348,11 +355,22 @@ def render_report(summary: dict) -> str:
     ])
 
 
-def update_readme(readme: Path, out: Path, summary: dict) -> None:
-    text = readme.read_text()
+def _readme_text(readme: Path) -> str:
+    """The README to rewrite, checked before any work: readable text with the markers."""
+    try:
+        text = readme.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(readme, "--readme", f"cannot be read as text ({e})") from None
     if README_BEGIN not in text or README_END not in text:
-        raise ValueError(f"{readme}: no {README_BEGIN!r} ... {README_END!r} markers")
-    rel = out.resolve().relative_to(readme.resolve().parent)
+        raise InputError(readme, "--readme", f"has no {README_BEGIN!r} ... {README_END!r} "
+                         "markers to write between")
+    return text
+
+
+def update_readme(readme: Path, out: Path, summary: dict) -> None:
+    text = _readme_text(readme)
+    # Links relative to the README, wherever the two are.
+    rel = Path(os.path.relpath(out.resolve(), readme.resolve().parent)).as_posix()
     body = "\n".join([
         README_BEGIN, "",
         f"From `shacc reproduce --out {rel} --readme {readme.name}` "
@@ -368,26 +386,18 @@ def update_readme(readme: Path, out: Path, summary: dict) -> None:
     write_atomic(readme, (head + body + tail).encode())
 
 
+# What reproduce writes into its output folder; a folder holding anything else is refused.
+REPRODUCE_FILES = ("fig*.png", "scene_field.png", "report.md", "summary.json", ".*.tmp")
+
+
 def cmd_reproduce(args) -> int:
+    check_output_dir(args.out, "--out", REPRODUCE_FILES)
+    if args.readme:
+        check_output_file(args.readme, "--readme")
+        _readme_text(Path(args.readme))
     n_random = args.random_scenes if args.random_scenes is not None else (4 if args.quick
                                                                            else 20)
     grid = args.field_grid if args.field_grid is not None else (16 if args.quick else 64)
     run(Path(args.out), n_random, args.seed, args.quick, grid, parse_sets(args.set),
         args.workers, Path(args.readme) if args.readme else None)
     return 0
-
-
-def add_reproduce(sub) -> None:
-    p = sub.add_parser("reproduce", help="the paper's experiment: Fig. 6 and Fig. 7")
-    p.add_argument("--out", default="reproduce_out", help="output folder")
-    p.add_argument("--random-scenes", type=int, default=None,
-                   help="random scenes (default 20; 4 with --quick)")
-    p.add_argument("--seed", type=int, default=0, help="seeds the random scenes and bootstrap")
-    p.add_argument("--quick", action="store_true",
-                   help="few random scenes, a coarse start grid, 200 bootstrap resamples")
-    p.add_argument("--field-grid", type=int, default=None,
-                   help="start grid per side for Fig. 7 (default 64; 16 with --quick)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
-    p.add_argument("--workers", type=int, default=None, help="precompute processes")
-    p.add_argument("--readme", help="also rewrite the marked section of this README")
-    p.set_defaults(func=cmd_reproduce)

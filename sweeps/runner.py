@@ -19,14 +19,14 @@ triggers a new precompute and overlapping sweeps share results.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
-import multiprocessing
 import os
 import pickle
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -37,21 +37,32 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-import shacc_jax
 from geometry_precompute import DEFAULTS, InputError, bake, precompute
 from geometry_precompute.scene import Scene, scene_to_dict
 from shacc_jax.types import OUTCOMES
 
+from . import memory
 from .config import SweepConfig
-from .output import write_atomic, write_json
+from .output import check_output_dir, write_atomic, write_json
+from .workers import precompute_pool
 
-# Device memory one rollout needs during evaluation, measured from the 10 000-scene
-# run on the H200 (rollout outputs, the activation pass and the tracking blocks) with
-# a safety factor: chunks are sized so that a chunk uses at most half the free memory.
-BYTES_PER_ROLLOUT = 600
-# Throughputs measured in benchmarks/RESULTS.md, for --dry-run's time estimate (random
-# 10-task scenes: 2 CPU cores 1.4e5 rollouts/s, one H100 9.2e7/s).
+# For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
+# second (random 10-task scenes: 2 CPU cores 1.4e5, one H100 9.2e7); precompute per task
+# and core (31 ms for a 10-task scene on one core); starting the spawned workers; one
+# compilation of the evaluation (5-7 s on the 2-core CPU, about 7 s on an H100); pyarrow
+# tables and Parquet writes per rollout and per chunk. The laptop sweep: estimated 15 s,
+# measured 19 s.
 RATES = {"cpu": 1.4e5, "gpu": 9.2e7}
+PRECOMPUTE_S_PER_TASK = 3.1e-3
+WORKER_START_S = 1.5
+COMPILE_S = 7.0
+TABLE_S_PER_ROLLOUT = 7e-7
+CHUNK_OVERHEAD_S = 0.05
+DRY_RUN_EXACT = 100_000
+
+
+# What a sweep writes into its output folder; a folder holding anything else is refused.
+SWEEP_FILES = ("config.json", "parts", "scenes.parquet", "rollouts.parquet", ".*.tmp", ".lock")
 
 
 def default_cache() -> Path:
@@ -97,19 +108,14 @@ def _precompute_cached(args):
 
 
 def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
-    """Scenes per chunk: the config's, lowered if the device's free memory is short."""
-    dev = jax.local_devices()[0]
-    stats = dev.memory_stats() if hasattr(dev, "memory_stats") else None
-    if stats and "bytes_limit" in stats:
-        free = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
-    else:
-        free = 2 << 30  # CPU: keep a chunk under ~1 GiB of working memory
+    """Scenes per chunk: the config's, lowered if the memory budget is short (a chunk of
+    one scene that still does not fit is evaluated in pieces of its start grid)."""
     per_scene = _bytes_per_scene(cfg, scenes, n_starts) * len(jax.local_devices())
-    return max(1, min(cfg.chunk, int(0.5 * free // per_scene)))
+    return max(1, min(cfg.chunk, memory.budget() // per_scene))
 
 
 def _bytes_per_scene(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
-    return BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * len(cfg.modes)
+    return memory.BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * len(cfg.modes)
 
 
 def _max_starts(cfg: SweepConfig, scenes: list[Scene]) -> int:
@@ -158,35 +164,93 @@ def _write_parquet(path: Path, table: pa.Table) -> None:
     write_atomic(path, sink.getvalue().to_pybytes())
 
 
-def dry_run(cfg: SweepConfig) -> dict:
-    scenes = cfg.scenes()
-    points = cfg.points
-    rollouts = 0
-    for p in points:
-        s0 = scenes[0].settings(DEFAULTS, p)
-        ny, nz = s0["start_grid"]
-        rollouts += sum(len(s.tasks) for s in scenes) * ny * nz * len(cfg.modes)
-    platform = jax.default_backend()
-    rate = RATES["gpu" if platform in ("gpu", "cuda", "rocm") else "cpu"]
-    n_starts = _max_starts(cfg, scenes)
-    chunk = _chunk_size(cfg, scenes, n_starts)
-    per_chunk = _bytes_per_scene(cfg, scenes, n_starts) * chunk
-    return {"points": len(points), "scenes": len(scenes), "scene_evaluations":
-            len(points) * len(scenes), "rollouts": int(rollouts), "chunk_scenes": chunk,
-            "estimated_memory_per_chunk_MB": per_chunk / 2**20, "devices":
-            [str(d) for d in jax.local_devices()], "estimated_rollout_seconds":
-            rollouts / rate, "rate_assumed_per_s": rate}
+def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
+    """Sizes and a time estimate, without building the scenes (a random source's task
+    counts come from the generator's seeds; beyond ``DRY_RUN_EXACT`` scenes, from a
+    sample of them)."""
+    n = cfg.source["count"] if cfg.source["kind"] == "random" else None
+    if n is not None and n > DRY_RUN_EXACT:
+        sample = replace(cfg, source={**cfg.source, "count": DRY_RUN_EXACT}).task_counts()
+        tasks_total, max_tasks = float(np.mean(sample)) * n, cfg.source["tasks"][1]
+    else:
+        counts = cfg.task_counts()
+        n, tasks_total, max_tasks = len(counts), float(sum(counts)), max(counts)
+    grids = [DEFAULTS.with_overrides(p)["start_grid"] for p in cfg.points]
+    if cfg.source["kind"] == "files":  # a scene file's own [settings] may set the grid
+        first = cfg.scenes()[0]
+        grids = [first.settings(DEFAULTS, p)["start_grid"] for p in cfg.points]
+    rollouts = sum(int(np.prod(g)) for g in grids) * tasks_total * len(cfg.modes)
+    # Precompute runs once per scene and distinct precompute-stage settings (the cache
+    # serves the rest; a warm cache makes this part smaller than estimated).
+    stages = {json.dumps(DEFAULTS.with_overrides(p).by_stage("precompute"), sort_keys=True,
+                         default=str) for p in cfg.points}
+    n_workers = workers or os.cpu_count() or 1
+    platform = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm") else "cpu"
+    chunk = max(1, min(cfg.chunk, n))
+    shapes = len({tuple(g) for g in grids}) * (1 if n % chunk == 0 else 2)
+    n_chunks = len(cfg.points) * -(-n // chunk)
+    est = {
+        "precompute": len(stages) * tasks_total * PRECOMPUTE_S_PER_TASK / n_workers
+        + WORKER_START_S,
+        "compile": shapes * COMPILE_S,
+        "rollouts": rollouts / RATES[platform],
+        "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
+    }
+    per_chunk = memory.BYTES_PER_ROLLOUT * int(max(np.prod(g) for g in grids)) * max_tasks * \
+        len(cfg.modes) * chunk
+    return {"points": len(cfg.points), "scenes": n, "scene_evaluations": len(cfg.points) * n,
+            "rollouts": int(rollouts), "chunks": n_chunks, "chunk_scenes": chunk,
+            "estimated_memory_per_chunk_MB": per_chunk / 2**20,
+            "devices": [str(d) for d in jax.local_devices()], "precompute_workers": n_workers,
+            "estimated_seconds": {k: round(v, 2) for k, v in est.items()},
+            "estimated_total_seconds": round(sum(est.values()), 1),
+            "rate_assumed_per_s": RATES[platform]}
 
 
 def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
               workers: int | None = None, progress: bool = True) -> dict:
-    out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache or default_cache())
+    check_output_dir(out, "--out", SWEEP_FILES)
+    check_output_dir(cache, "--cache", ("*",))
+    out.mkdir(parents=True, exist_ok=True)
     cache.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out):
+        return _run_locked(cfg, out, cache, workers, progress)
+
+
+@contextlib.contextmanager
+def folder_lock(out: Path):
+    """One sweep at a time in ``out``: an exclusive lock on ``out/.lock``, held for the
+    run and released by the kernel whenever the process ends (SIGKILL included), so a
+    stale lock cannot outlive its sweep. A second run into the folder is refused."""
+    fd = os.open(out / ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise InputError(out, "--out", f"another shacc sweep (pid {holder}) is writing "
+                             "into this folder; wait for it to end or use another --out") \
+                from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
+                progress: bool) -> dict:
     h = cfg.hash()
     marker = out / "config.json"
     if marker.exists():
-        previous = json.loads(marker.read_text())
+        try:
+            previous = json.loads(marker.read_text())
+            if not isinstance(previous, dict):
+                raise ValueError("not an object")
+        except (ValueError, UnicodeDecodeError) as e:
+            raise InputError(marker, "<file>", f"is damaged ({e}); remove the folder or use "
+                             "a new --out") from None
         if previous.get("hash") != h:
             raise InputError(out, "config", f"this folder holds another sweep (hash "
                              f"{previous.get('hash')}, this config {h}); use a new --out")
@@ -218,11 +282,10 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
         stage[name] += now - since
         return now
 
-    ctx = multiprocessing.get_context("spawn")  # JAX threads make fork unsafe
     bar = tqdm(total=len(chunks), initial=len(chunks) - len(todo), unit="chunk",
-               disable=not progress, file=sys.stdout, desc=cfg.name)
+               disable=None if progress else True, file=sys.stderr, desc=cfg.name)
     n_workers = workers or os.cpu_count() or 1
-    with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
+    with precompute_pool(n_workers) as pool:
         for c in todo:
             point = cfg.points[c.point]
             args = [(scenes[i], point, str(cache)) for i in c.scenes]
@@ -236,7 +299,7 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
             # One task count for every chunk, so chunks of a point share one compilation.
             baked = bake(results, max_tasks)
             t = lap("bake", t)
-            ev = shacc_jax.evaluate_on_devices(baked, cfg.modes)
+            ev = memory.evaluate_in_pieces(baked, cfg.modes)
             t = lap("evaluate", t)
             scenes_df, rollouts_df = _tables(cfg, c, results, ev)
             t = lap("tables", t)
@@ -266,7 +329,7 @@ def cmd_sweep(args) -> int:
 
     cfg = load_config(args.config)
     if args.dry_run:
-        info = dry_run(cfg)
+        info = dry_run(cfg, args.workers)
         for k, v in info.items():
             print(f"{k}: {v:.4g}" if isinstance(v, float) else f"{k}: {v}")
         return 0
@@ -276,14 +339,3 @@ def cmd_sweep(args) -> int:
                         args.workers, progress=not args.quiet)
     print(json.dumps(summary))
     return 0
-
-
-def add_sweep(sub) -> None:
-    p = sub.add_parser("sweep", help="a parameter sweep from a TOML config (resumable)")
-    p.add_argument("config", help="sweep config TOML")
-    p.add_argument("--out", help="output folder (resumes if it holds this sweep)")
-    p.add_argument("--dry-run", action="store_true", help="print sizes and estimates only")
-    p.add_argument("--cache", help="precompute cache folder (default ~/.cache/shacc/precompute)")
-    p.add_argument("--workers", type=int, default=None, help="precompute processes")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_sweep)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,9 @@ from hypothesis import settings
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "egl")  # before anything imports mujoco
+# Compiled programs of commands run by the tests go to a folder of this run, not the
+# user's cache (tests that study the cache set their own).
+os.environ.setdefault("SHACC_COMPILE_CACHE", tempfile.mkdtemp(prefix="shacc-test-compiled-"))
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
 
 settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)

@@ -5,11 +5,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import write_scene
 
-from geometry_precompute import shipped_scene_paths
+from geometry_precompute import load_scene, shipped_scene_paths
 from sweeps.cli import main
 
 SCENE = str(shipped_scene_paths()[8])  # mug-behind-two
@@ -70,3 +71,144 @@ def test_bad_set_value(capsys):
     assert main(["precompute", SCENE, "--set", "v_max=-1"]) == 2
     assert "v_max" in capsys.readouterr().err
     assert main(["precompute", SCENE, "--set", "bogus=1"]) == 2
+
+
+def _one_line_error(capsys, argv, *words):
+    """``argv`` fails with exit 2 and one stderr line holding ``words``."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err, err
+    for w in words:
+        assert w in err, (w, err)
+    return err
+
+
+def test_path_arguments_that_are_not_what_they_should_be(tmp_path, capsys):
+    """Every command and every kind of path argument: missing, a folder where a file is
+    expected, not UTF-8 text, a file where a folder is expected, a folder holding
+    something else. One line, exit 2, nothing written."""
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"name = \"\xff\xfe\x00\"\n")
+    missing = tmp_path / "missing.toml"
+    a_file = tmp_path / "a_file"
+    a_file.write_text("not a folder\n")
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("a colleague's file\n")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+
+    for cmd in (["precompute"], ["export-mjcf"], ["render", "--out", str(tmp_path / "r.png")]):
+        tail = [str(tmp_path / "x.xml")] if cmd == ["export-mjcf"] else []
+        _one_line_error(capsys, [*cmd, str(folder), *tail], str(folder), "is a folder")
+        _one_line_error(capsys, [*cmd, str(binary), *tail], str(binary), "not UTF-8")
+        _one_line_error(capsys, [*cmd, str(missing), *tail], str(missing), "no such file")
+    _one_line_error(capsys, ["evaluate", str(binary)], str(binary), "not UTF-8")
+    _one_line_error(capsys, ["evaluate", str(folder)], str(folder), "no *.toml")
+    for cfg in (folder, binary, missing):
+        _one_line_error(capsys, ["sweep", str(cfg), "--out", str(tmp_path / "o")], str(cfg))
+
+    # outputs: a folder where a file is expected, a file where a folder is expected
+    _one_line_error(capsys, ["precompute", SCENE, "--json", str(folder)], "--json", "is a folder")
+    _one_line_error(capsys, ["evaluate", SCENE, "--json", str(a_file / "x.json")], "--json",
+                    "is a file, not a folder")
+    _one_line_error(capsys, ["render", SCENE, "--out", str(folder)], "--out", "is a folder")
+    _one_line_error(capsys, ["export-mjcf", SCENE, str(folder)], "OUT", "is a folder")
+    _one_line_error(capsys, ["reproduce", "--out", str(a_file)], "--out", "is a file")
+    _one_line_error(capsys, ["reproduce", "--out", str(other)], "--out", "notes.txt")
+    sweep_cfg = str(Path(__file__).parents[1] / "sweeps" / "configs" / "laptop.toml")
+    _one_line_error(capsys, ["sweep", sweep_cfg, "--out", str(a_file)], "--out", "is a file")
+    _one_line_error(capsys, ["sweep", sweep_cfg, "--out", str(other)], "--out", "notes.txt")
+    _one_line_error(capsys, ["sweep", sweep_cfg, "--out", str(tmp_path / "new"), "--cache",
+                             str(a_file)], "--cache", "is a file")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_damaged_sweep_marker_is_one_line(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "config.json").write_text("{ not json")
+    sweep_cfg = str(Path(__file__).parents[1] / "sweeps" / "configs" / "laptop.toml")
+    _one_line_error(capsys, ["sweep", sweep_cfg, "--out", str(out), "--cache",
+                             str(tmp_path / "c")], "config.json", "damaged")
+
+
+def test_several_scenes_one_batch_json_lines(tmp_path, capsys):
+    paths = [str(p) for p in shipped_scene_paths()[:2]]
+    folder = tmp_path / "more"
+    folder.mkdir()
+    for p in shipped_scene_paths()[8:10]:
+        (folder / Path(p).name).write_text(Path(p).read_text())
+    out = tmp_path / "all.jsonl"
+    assert main(["evaluate", *paths, str(folder), "--set", "start_grid=[2,2]",
+                 "--modes", "baseline", "shacc", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    lines = out.read_text().splitlines()
+    objs = [json.loads(line) for line in lines]
+    expected = [load_scene(p).name for p in [*paths, *sorted(folder.glob("*.toml"))]]
+    assert [o["scene"] for o in objs] == expected
+    assert "4 scenes" in text and "one batch" in text
+    for o in objs:
+        assert list(o["modes"]) == ["baseline", "shacc"] and len(o["starts"]) == 4
+        # one table row per scene and mode
+        assert sum(line.split()[:2] == [o["scene"], m] for line in text.splitlines()
+                   for m in ("baseline", "shacc")) == 2
+
+
+def test_one_scene_alone_equals_the_same_scene_in_a_batch(tmp_path):
+    a, b = str(shipped_scene_paths()[8]), str(shipped_scene_paths()[10])
+    one, two = tmp_path / "one.json", tmp_path / "two.jsonl"
+    assert main(["evaluate", a, "--set", "start_grid=[3,2]", "--json", str(one)]) == 0
+    assert main(["evaluate", b, a, "--set", "start_grid=[3,2]", "--json", str(two)]) == 0
+    alone = json.loads(one.read_text())
+    batched = [json.loads(x) for x in two.read_text().splitlines()][1]
+    assert alone == batched
+
+
+def test_several_scenes_need_one_start_grid(tmp_path, capsys):
+    small = write_scene(tmp_path, Path(SCENE).read_text() + "\n[settings]\nstart_grid = [2, 2]\n")
+    _one_line_error(capsys, ["evaluate", SCENE, str(small), "--json", str(tmp_path / "x")],
+                    "start_grid", "one start grid")
+    assert not (tmp_path / "x").exists()
+
+
+def test_duplicate_modes_rejected(capsys):
+    _one_line_error(capsys, ["evaluate", SCENE, "--modes", "baseline", "baseline"], "--modes")
+
+
+def test_compilation_cache_is_written_then_reused(tmp_path):
+    """A second `shacc evaluate` of the same shapes compiles nothing new: every program
+    the first run stored is found, so the cache folder gains no file."""
+    cache = tmp_path / "jax-cache"
+    env = {**__import__("os").environ, "SHACC_COMPILE_CACHE": str(cache),
+           "JAX_PLATFORMS": "cpu"}
+    cmd = [sys.executable, "-m", "sweeps.cli", "evaluate", SCENE, "--set", "start_grid=[2,2]"]
+    first = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    assert first.returncode == 0, first.stderr
+    stored = sorted(str(p.relative_to(cache)) for p in cache.rglob("*"))
+    assert any(name.startswith("programs/export-evaluate-") for name in stored), stored
+    assert sum(name.startswith("xla/") for name in stored) >= 2, stored
+    second = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    assert second.returncode == 0, second.stderr
+    assert sorted(str(p.relative_to(cache)) for p in cache.rglob("*")) == stored
+    assert second.stdout.split("time:")[0] == first.stdout.split("time:")[0]  # same results
+    off = subprocess.run(cmd, capture_output=True, text=True,
+                         env={**env, "SHACC_COMPILE_CACHE": "off"})
+    assert off.returncode == 0
+    assert sorted(str(p.relative_to(cache)) for p in cache.rglob("*")) == stored
+
+
+def test_cli_mode_names_are_the_evaluators():
+    import shacc_jax
+    from sweeps import cli
+
+    assert cli.MODES == shacc_jax.MODES
+
+
+def test_precompute_command_does_not_import_jax(tmp_path):
+    code = ("import sys; from sweeps.cli import main; "
+            f"main(['precompute', {SCENE!r}]); print('jax' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "False"

@@ -13,7 +13,7 @@ from sweeps.reproduce import CATEGORIES, README_BEGIN, README_END
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
-    readme = out / "README.md"
+    readme = tmp_path_factory.mktemp("readme") / "README.md"  # not in --out: not its file
     readme.write_text(f"# x\n\n{README_BEGIN}\nold\n{README_END}\n\ntail\n")
     assert main(["reproduce", "--quick", "--random-scenes", "2", "--field-grid", "6",
                  "--workers", "1", "--out", str(out), "--readme", str(readme)]) == 0

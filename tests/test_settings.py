@@ -29,7 +29,7 @@ def test_every_spec_name_present():
 
 
 @pytest.mark.parametrize("name,value,rule", [
-    ("dt", 0.0, "> 0"), ("dt", math.nan, "finite"), ("shrink_step", 1.5, "(0, 1]"),
+    ("dt", 0.0, "(0, 10]"), ("dt", math.nan, "finite"), ("shrink_step", 1.5, "[0.001, 1]"),
     ("ambiguity", "random", "one of"), ("start_grid", [6], "two"), ("max_steps", 2.5, "integer"),
     ("start_z_range", [0.3, 0.1], "low <= high"), ("warp", 1, "unknown setting"),
 ])
@@ -62,3 +62,79 @@ def test_cli_value_parsing():
         parse_cli_value("nope", "1")
     with pytest.raises(InputError, match="number"):
         parse_cli_value("dt", "fast")
+
+
+DOTTED = sorted(n for n in SPECS if "." in n)
+SCENE_HEAD = ('name = "dotted"\n[[objects]]\nid = "m"\nkind = "mug"\nposition = [0, 0, 0]\n'
+              '[[tasks]]\nid = "g"\nobject = "m"\ntemplate = "side_grasp"\n')
+
+
+def _value(name):
+    return round(SPECS[name].default * 0.9, 6)  # valid for every dotted setting
+
+
+@pytest.mark.parametrize("name", DOTTED)
+def test_dotted_setting_bare_and_quoted_mean_the_same(tmp_path, name):
+    """SPEC 16: `a.b = v` (a nested TOML table) and `"a.b" = v` name one setting."""
+    from geometry_precompute import load_scene
+
+    v = _value(name)
+    bare = tmp_path / "bare.toml"
+    bare.write_text(SCENE_HEAD + f"[settings]\n{name} = {v}\n")
+    quoted = tmp_path / "quoted.toml"
+    quoted.write_text(SCENE_HEAD + f'[settings]\n"{name}" = {v}\n')
+    s_bare, s_quoted = load_scene(bare).settings(), load_scene(quoted).settings()
+    assert s_bare[name] == s_quoted[name] == pytest.approx(v)
+    assert s_bare == s_quoted and s_bare[name] != SPECS[name].default
+
+
+@pytest.mark.parametrize("form", ["bare", "quoted", "table"])
+def test_dotted_settings_in_sweep_config_axes_points_and_settings(tmp_path, form):
+    from sweeps.config import load_config
+
+    key = {"bare": "side_grasp.radius_init", "quoted": '"side_grasp.radius_init"'}
+    if form == "table":
+        body = ("[settings.top_grasp]\noffset = 0.12\n[axes.side_grasp]\n"
+                "radius_init = [0.15, 0.2]\n[[points]]\n[points.handle_grasp]\n"
+                "length_init = 0.25\n")
+    else:
+        k = key[form]
+        body = (f'[settings]\n{k.replace("side_grasp.radius_init", "top_grasp.offset")} = 0.12\n'
+                f"[axes]\n{k} = [0.15, 0.2]\n[[points]]\n"
+                f'{k.replace("side_grasp.radius_init", "handle_grasp.length_init")} = 0.25\n')
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / "a.toml").write_text(SCENE_HEAD)
+    cfg_path = tmp_path / "s.toml"
+    cfg_path.write_text('name = "d"\n[source]\nkind = "files"\npath = "scenes"\n' + body)
+    cfg = load_config(cfg_path)
+    assert cfg.points == [
+        {"top_grasp.offset": 0.12, "side_grasp.radius_init": 0.15},
+        {"top_grasp.offset": 0.12, "side_grasp.radius_init": 0.2},
+        {"top_grasp.offset": 0.12, "handle_grasp.length_init": 0.25},
+    ]
+
+
+def test_unknown_name_inside_a_nested_table_names_the_full_dotted_name(tmp_path):
+    from geometry_precompute import load_scene
+
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE_HEAD + "[settings]\nside_grasp.radius_inti = 0.18\n")
+    with pytest.raises(InputError) as e:
+        load_scene(p)
+    assert str(e.value) == f"{p}: settings.side_grasp.radius_inti: unknown setting " \
+        "(`shacc settings` lists them)"
+
+
+def test_both_forms_of_one_name_is_an_error(tmp_path):
+    from geometry_precompute import load_scene
+
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE_HEAD + '[settings]\n"v_max" = 0.2\nside_grasp.radius_init = 0.18\n'
+                 '"side_grasp.radius_init" = 0.19\n')
+    with pytest.raises(InputError, match=r"settings\.side_grasp\.radius_init: given twice"):
+        load_scene(p)
+
+
+def test_overrides_from_python_take_nested_tables_too():
+    s = DEFAULTS.with_overrides({"side_grasp": {"radius_init": 0.17}, "v_max": 0.2})
+    assert s["side_grasp.radius_init"] == 0.17 and s["v_max"] == 0.2

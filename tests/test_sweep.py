@@ -42,7 +42,7 @@ def write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
 
 @pytest.mark.parametrize("text,field,rule", [
     (CONFIG.replace("v_max =", "warp_speed ="), "axes.warp_speed", "unknown setting"),
-    (CONFIG.replace("[0.15, 0.3]", "[0.15, -1.0]"), "axes.v_max", "> 0"),
+    (CONFIG.replace("[0.15, 0.3]", "[0.15, -1.0]"), "axes.v_max", "(0, 100]"),
     (CONFIG + '[[points]]\nbogus = 1\n', "points[0].bogus", "unknown setting"),
     (CONFIG.replace('name = "tiny"', 'name = "tiny"\nspeed = 1'), "speed", "unknown field"),
     (CONFIG.replace('kind = "random"', 'kind = "lottery"'), "source.kind", "random or files"),

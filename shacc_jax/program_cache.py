@@ -1,0 +1,101 @@
+"""The traced evaluation program kept on disk (``jax.export``), off unless asked for.
+
+JAX's persistent compilation cache skips XLA's compilation, but every new process
+still traces and lowers the evaluation (about 1.6 s of Python on a CPU for the
+vmapped Automaton, more than the rest of ``shacc evaluate`` together). This module
+stores the lowered program itself, serialised by ``jax.export``, keyed by everything
+that decides it: the source of this package, the jax and jaxlib versions, the
+backend, x64 mode, the static arguments and the input shapes and dtypes. A later
+process with the same key deserialises the program and calls it; its compilation
+then comes from the persistent cache. Any change to the code gives a new key.
+
+:func:`set_dir` turns it on (the command line does, beside the compilation cache);
+a library user who never calls it traces as usual.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+from jax import export
+
+_DIR: Path | None = None
+_SOURCE_HASH: str | None = None
+_LOADED: dict[str, Callable] = {}  # key -> the deserialised program, jitted, this process
+
+
+def set_dir(path: str | Path | None) -> None:
+    """Keep exported programs in ``path`` (None turns the cache off)."""
+    global _DIR
+    _DIR = None if path is None else Path(path)
+
+
+def _source_hash() -> str:
+    global _SOURCE_HASH
+    if _SOURCE_HASH is None:
+        h = hashlib.sha256()
+        for f in sorted(Path(__file__).parent.glob("*.py")):
+            h.update(f.name.encode() + b"\0" + f.read_bytes())
+        _SOURCE_HASH = h.hexdigest()
+    return _SOURCE_HASH
+
+
+def _key(name: str, static: tuple, leaves: list) -> str:
+    import jaxlib
+
+    parts = [name, _source_hash(), jax.__version__, jaxlib.__version__,
+             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static)]
+    parts += [f"{tuple(x.shape)}:{x.dtype}" for x in leaves]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+
+
+def call(name: str, jitted: Callable, static: dict, args, out_example):
+    """``jitted(args, **static)`` through the exported program cache.
+
+    ``jitted`` is a ``jax.jit`` function whose static arguments are ``static``; it
+    takes the pytree ``args`` and returns a pytree shaped like ``out_example`` (any
+    instance of the output type: only its structure is used). Without a cache folder
+    this is the plain call.
+    """
+    if _DIR is None:
+        return jitted(args, **static)
+    leaves, in_tree = jax.tree.flatten(args)
+    key = _key(name, tuple(sorted(static.items())), leaves)
+    run = _LOADED.get(key)
+    if run is None:
+        path = _DIR / f"export-{name}-{key}.bin"
+        exp = None
+        if path.exists():
+            try:
+                exp = export.deserialize(bytearray(path.read_bytes()))
+            except Exception:  # a damaged or foreign entry is rebuilt
+                exp = None
+        if exp is None:
+            def flat(*xs):
+                return tuple(jax.tree.leaves(jitted(jax.tree.unflatten(in_tree, xs),
+                                                    **static)))
+
+            specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+            exp = export.export(jax.jit(flat))(*specs)
+            _store(path, exp.serialize())
+        run = _LOADED[key] = jax.jit(exp.call)
+    return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
+
+
+def _store(path: Path, data: bytes) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            mask = os.umask(0)
+            os.umask(mask)
+            os.fchmod(f.fileno(), 0o666 & ~mask)  # readable as the user's umask says
+        os.replace(tmp, path)
+    except OSError:
+        pass  # an unwritable cache costs time on the next run, never this one

@@ -1,0 +1,59 @@
+"""Compiled programs kept on disk, on for every command that evaluates.
+
+Compiling the evaluation takes seconds and the rollouts of one scene milliseconds,
+so every ``shacc`` command that evaluates keeps what it built: a later run whose
+padded shapes (tasks, starts, objects), modes and layout were seen before loads the
+program instead of building it. Two kinds of entry, in two subfolders:
+
+- ``xla/``: JAX's persistent compilation cache (XLA executables, keyed by JAX on the
+  program, the backend and the jax/jaxlib versions);
+- ``programs/``: the evaluation's traced and lowered program, serialised with
+  ``jax.export`` (:mod:`shacc_jax.program_cache`), keyed on the source of
+  ``shacc_jax``, the versions, the backend and the shapes, so tracing is skipped too.
+
+Where: ``$SHACC_COMPILE_CACHE`` if set (a folder, or ``off`` to disable), else
+``$XDG_CACHE_HOME/shacc/compiled`` (``~/.cache/shacc/compiled`` when
+``XDG_CACHE_HOME`` is unset). Entries never go stale (a change of code or version
+makes new keys); the folder only grows with new shapes, and deleting it at any time
+is safe (``rm -r ~/.cache/shacc/compiled``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+ENV = "SHACC_COMPILE_CACHE"
+
+
+def cache_dir() -> Path | None:
+    """The folder in use, or None when the cache is turned off."""
+    value = os.environ.get(ENV, "").strip()
+    if value.lower() == "off":
+        return None
+    if value:
+        return Path(value).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "shacc" / "compiled"
+
+
+def enable() -> Path | None:
+    """Turn both caches on for this process (before the first compilation)."""
+    path = cache_dir()
+    if path is None:
+        return None
+    try:
+        (path / "xla").mkdir(parents=True, exist_ok=True)
+        (path / "programs").mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None  # an unwritable cache costs time, never a failed run
+    import jax
+
+    from shacc_jax import program_cache
+
+    jax.config.update("jax_compilation_cache_dir", str(path / "xla"))
+    # Cache every program, however quick to compile: the small ones add up.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    program_cache.set_dir(path / "programs")
+    return path

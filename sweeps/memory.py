@@ -1,0 +1,100 @@
+"""Memory: how much an evaluation needs, how much it may use, and evaluation in pieces
+when a valid batch is larger than that.
+
+A batch's device memory grows with scenes x starts x tasks x modes (the rollout
+outputs, the activation pass and the tracking blocks). Before anything is allocated,
+:func:`evaluate_in_pieces` compares that estimate with the budget and, when it is too
+large, evaluates the start grid in pieces that fit, every piece padded to one size (one
+compiled program), and joins them: each rollout depends only on its own start, so the
+joined rollouts equal one piece's, and the per-scene metrics are computed once over
+the joined rollouts. Where even one start pose of the batch does not fit, it stops with
+an error that says how much memory it needs.
+
+The budget: ``$SHACC_MEMORY_BUDGET`` (bytes; suffixes K, M, G allowed) if set, else half
+of what the device has free (an accelerator's free memory, or the host's available
+memory on a CPU).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+
+import jax
+import numpy as np
+
+import shacc_jax
+from geometry_precompute import BakedScenes, InputError
+from shacc_jax.types import Evaluation, Rollouts
+
+# Device memory one rollout needs during evaluation, measured from the 10 000-scene run
+# on the H200 (rollout outputs, the activation pass and the tracking blocks), with a
+# safety factor.
+BYTES_PER_ROLLOUT = 600
+ENV = "SHACC_MEMORY_BUDGET"
+
+
+def _parse_bytes(text: str) -> int:
+    units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+    t = text.strip().upper().removesuffix("B")
+    scale = units.get(t[-1:], 1)
+    try:
+        value = float(t[:-1] if t[-1:] in units else t) * scale
+    except ValueError:
+        value = -1
+    if not value >= 1:
+        raise InputError(f"${ENV}", ENV, f"must be a number of bytes such as 2G, got {text!r}")
+    return int(value)
+
+
+def budget() -> int:
+    """Bytes one evaluation may use."""
+    if os.environ.get(ENV):
+        return _parse_bytes(os.environ[ENV])
+    dev = jax.local_devices()[0]
+    stats = dev.memory_stats() if hasattr(dev, "memory_stats") else None
+    if stats and "bytes_limit" in stats:
+        free = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
+    else:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(0.5 * free)
+
+
+def bytes_needed(n_scenes: int, n_starts: int, n_tasks: int, n_modes: int) -> int:
+    return BYTES_PER_ROLLOUT * n_scenes * n_starts * n_tasks * n_modes
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("GB", 2**30), ("MB", 2**20), ("KB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:,.1f} {unit}"
+    return f"{int(n)} bytes"
+
+
+def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
+                       limit: int | None = None) -> Evaluation:
+    """``evaluate(baked, modes)`` (default ``shacc_jax.evaluate_on_devices``) as NumPy
+    arrays, split over the start grid when the batch needs more than ``limit`` bytes
+    (default :func:`budget`)."""
+    evaluate = evaluate or shacc_jax.evaluate_on_devices
+    limit = budget() if limit is None else limit
+    S, N, T, M = baked.n_scenes, baked.n_starts, baked.n_tasks, len(modes)
+    per_start = bytes_needed(S, 1, T, M)
+    if per_start * N <= limit:
+        return jax.tree.map(np.asarray, evaluate(baked, modes))
+    n_per = limit // per_start
+    if n_per < 1:
+        raise InputError("<memory>", "batch", f"one start pose of this batch ({S} scenes x "
+                         f"{T} tasks x {M} modes) needs {_size(per_start)}, more than the "
+                         f"budget of {_size(limit)}; evaluate fewer scenes at once or raise "
+                         f"${ENV}")
+    pieces = []
+    for a in range(0, N, n_per):
+        idx = np.minimum(np.arange(a, a + n_per), N - 1)  # the last piece padded: one shape
+        out = evaluate(replace(baked, starts=baked.starts[:, idx]), modes)
+        keep = min(n_per, N - a)
+        pieces.append([np.asarray(x)[:, :, :keep] for x in out.rollouts])
+    rollouts = Rollouts(*(np.concatenate(parts, axis=2) for parts in zip(*pieces,
+                                                                          strict=True)))
+    metrics = shacc_jax.batch_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask)
+    return Evaluation(rollouts, jax.tree.map(np.asarray, metrics))
