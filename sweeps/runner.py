@@ -50,7 +50,7 @@ from .workers import precompute_pool
 # second (random 10-task scenes: 2 CPU cores 1.4e5, one H100 9.2e7); precompute per task
 # and core (31 ms for a 10-task scene on one core); starting the spawned workers; one
 # compilation of the evaluation (5-7 s on the 2-core CPU, about 7 s on an H100); pyarrow
-# tables and Parquet writes per rollout and per chunk. The laptop sweep: estimated 15 s,
+# tables and Parquet writes per rollout and per chunk. The laptop sweep: estimated 13.5 s,
 # measured 19 s.
 RATES = {"cpu": 1.4e5, "gpu": 9.2e7}
 PRECOMPUTE_S_PER_TASK = 3.1e-3
