@@ -39,3 +39,18 @@ def write_scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+def process_group_members(pgid: int) -> list[int]:
+    """Live (not zombie) processes of a process group, read from /proc: what a command
+    started in its own session left behind."""
+    found = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pgid and fields[0] != "Z":
+                found.append(int(d.name))
+    return found

@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from conftest import process_group_members
 
 from geometry_precompute import SPECS, InputError, load_scene, precompute, shipped_scene_paths
 from geometry_precompute.scene import SceneWarning
@@ -190,20 +191,7 @@ def test_ctrl_c_ends_with_one_line_and_no_process_left(tmp_path):
     assert proc.returncode == 130, err
     assert err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err, err
     time.sleep(1)
-    assert _group_members(proc.pid) == []
-
-
-def _group_members(pgid: int) -> list[int]:
-    found = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[2]) == pgid and fields[0] != "Z":
-                found.append(int(d.name))
-    return found
+    assert process_group_members(proc.pid) == []
 
 
 def test_public_precompute_raises_input_error():

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import process_group_members
 
 from geometry_precompute import InputError, bake, precompute, random_scene
 from sweeps.config import load_config, parse_config
@@ -148,7 +149,8 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
     out, cache = tmp_path / "killed", tmp_path / "cache"
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     proc = subprocess.Popen(_sweep_cmd(config, out, cache), env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)  # its own group: to find its workers
     first = out / "parts" / "scenes-000000.parquet"
     deadline = time.time() + 240
     while not first.exists() and proc.poll() is None and time.time() < deadline:
@@ -156,6 +158,10 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
     assert first.exists(), "the sweep wrote no chunk before the deadline"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+    deadline = time.time() + 10  # the kernel kills the orphaned workers (PR_SET_PDEATHSIG)
+    while process_group_members(proc.pid) and time.time() < deadline:
+        time.sleep(0.1)
+    assert process_group_members(proc.pid) == [], "worker processes outlived the sweep"
     done = sorted(p.name for p in (out / "parts").glob("scenes-*.parquet"))
     assert 1 <= len(done) < 6 and not (out / "scenes.parquet").exists()
     res = subprocess.run(_sweep_cmd(config, out, cache), env=env, capture_output=True,
