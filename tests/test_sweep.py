@@ -202,3 +202,12 @@ print("ok", two.rollouts.outcome.shape)
                          text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.startswith("ok (12, 3, 36, 3)")
+
+
+def test_task_counts_without_building_match_the_built_scenes(tmp_path):
+    """The dry run counts a random scene's tasks from its seed alone: the generator's
+    first draw. Kept equal to the scenes the generator builds."""
+    cfg = parse_config({"name": "n", "source": {"kind": "random", "count": 12,
+                                                "tasks": [3, 9], "seed": 40}},
+                       "<test>", tmp_path)
+    assert cfg.task_counts() == [len(s.tasks) for s in cfg.scenes()]
