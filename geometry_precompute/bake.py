@@ -144,8 +144,11 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         per_scene = [start_poses(r.scene, r.settings) for r in results]
         counts = {len(p) for p in per_scene}
         if len(counts) != 1:
-            raise InputError("<bake>", "start_grid", "every scene of one batch needs the same "
-                             f"number of start poses, got {sorted(counts)}")
+            odd = next(r for r, p in zip(results, per_scene, strict=True)
+                       if len(p) != len(per_scene[0]))
+            raise InputError(odd.scene.source, "start_grid", "every scene of one batch needs "
+                             f"the same number of start poses, got {sorted(counts)}: "
+                             "evaluate them apart or give --set start_grid=[NY,NZ]")
         starts_arr = np.stack(per_scene)
     else:
         starts_arr = np.asarray(starts, dtype=np.float64)

@@ -45,11 +45,11 @@ def _source_hash() -> str:
     return _SOURCE_HASH
 
 
-def _key(name: str, static: tuple, leaves: list) -> str:
+def _key(name: str, static: tuple, tree, leaves: list) -> str:
     import jaxlib
 
     parts = [name, _source_hash(), jax.__version__, jaxlib.__version__,
-             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static)]
+             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static), str(tree)]
     parts += [f"{tuple(x.shape)}:{x.dtype}" for x in leaves]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 
@@ -65,7 +65,7 @@ def call(name: str, jitted: Callable, static: dict, args, out_example):
     if _DIR is None:
         return jitted(args, **static)
     leaves, in_tree = jax.tree.flatten(args)
-    key = _key(name, tuple(sorted(static.items())), leaves)
+    key = _key(name, tuple(sorted(static.items())), in_tree, leaves)
     run = _LOADED.get(key)
     if run is None:
         path = _DIR / f"export-{name}-{key}.bin"
@@ -88,6 +88,7 @@ def call(name: str, jitted: Callable, static: dict, args, out_example):
 
 
 def _store(path: Path, data: bytes) -> None:
+    tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -97,5 +98,6 @@ def _store(path: Path, data: bytes) -> None:
             os.umask(mask)
             os.fchmod(f.fileno(), 0o666 & ~mask)  # readable as the user's umask says
         os.replace(tmp, path)
-    except OSError:
-        pass  # an unwritable cache costs time on the next run, never this one
+    except OSError:  # an unwritable cache costs time on the next run, never this one
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)

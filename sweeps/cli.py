@@ -81,24 +81,21 @@ def build_parser() -> argparse.ArgumentParser:
                 "defaults: `shacc settings`.", formatter_class=_Help)
     p.add_argument("--version", action="version", version=f"shacc {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
-    _sub = sub.add_parser
 
-    def add_parser(*a, **kw):
-        return _sub(*a, formatter_class=_Help, **kw)
+    def command(name: str, help: str) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=help, formatter_class=_Help)
 
-    sub.add_parser = add_parser
-
-    c = sub.add_parser("settings", help="list every setting: default, type, range, meaning")
+    c = command("settings", "list every setting: default, type, range, meaning")
     c.add_argument("--json", action="store_true", help="as JSON (one object per setting)")
     c.set_defaults(func="settings_cmd:cmd_settings")
 
-    c = sub.add_parser("precompute", help="C, clusters and Shrinking of one scene")
+    c = command("precompute", "C, clusters and Shrinking of one scene")
     c.add_argument("scene", help="scene TOML file")
     _add_set(c)
     c.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
     c.set_defaults(func="precompute_cmd:cmd_precompute")
 
-    c = sub.add_parser("evaluate", help="evaluate scenes in every mode, as one batch (SPEC 12a)")
+    c = command("evaluate", "evaluate scenes in every mode, as one batch (SPEC 12a)")
     c.add_argument("scene", nargs="+",
                    help="scene TOML files, or folders of them (all evaluated as one batch)")
     _add_set(c)
@@ -108,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write SPEC section 12a's object, one line per scene (JSON Lines)")
     c.set_defaults(func="evaluate_cmd:cmd_evaluate")
 
-    c = sub.add_parser("reproduce", help="the paper's experiment: Fig. 6 and Fig. 7")
+    c = command("reproduce", "the paper's experiment: Fig. 6 and Fig. 7")
     c.add_argument("--out", default="reproduce_out", help="output folder")
     c.add_argument("--random-scenes", type=_int_in(0, 100_000), default=None,
                    help="random scenes (default 20; 4 with --quick)")
@@ -124,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--readme", help="also rewrite the marked section of this README")
     c.set_defaults(func="reproduce:cmd_reproduce")
 
-    c = sub.add_parser("sweep", help="a parameter sweep from a TOML config (resumable)")
+    c = command("sweep", "a parameter sweep from a TOML config (resumable)")
     c.add_argument("config", help="sweep config TOML")
     c.add_argument("--out", help="output folder (resumes if it holds this sweep)")
     c.add_argument("--dry-run", action="store_true", help="print sizes and estimates only")
@@ -134,13 +131,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func="runner:cmd_sweep")
 
-    c = sub.add_parser("export-mjcf", help="write a scene as MJCF (loads in MuJoCo)")
+    c = command("export-mjcf", "write a scene as MJCF (loads in MuJoCo)")
     c.add_argument("scene", help="scene TOML file")
     c.add_argument("out", help="MJCF file to write")
     _add_set(c)
     c.set_defaults(func="render:cmd_export")
 
-    c = sub.add_parser("render", help="3-D MuJoCo picture beside the top-down view")
+    c = command("render", "3-D MuJoCo picture beside the top-down view")
     c.add_argument("scene", help="scene TOML file")
     c.add_argument("--out", required=True, help="PNG file")
     c.add_argument("--mode", default="shacc", choices=list(MODES),

@@ -86,11 +86,6 @@ def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
     results = [load_and_precompute(p, args.set) for p in paths]
     t1 = time.perf_counter()
-    counts = {int(r.settings["start_grid"][0] * r.settings["start_grid"][1]) for r in results}
-    if len(counts) > 1:
-        raise InputError(paths[0], "start_grid", "scenes evaluated together need one start "
-                         f"grid size, got {sorted(counts)} start poses; evaluate them apart "
-                         "or give --set start_grid=[NY,NZ]")
     ev = evaluate_results(results, args.modes)
     with human_output(args.json):
         if len(results) == 1:

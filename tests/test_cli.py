@@ -169,7 +169,7 @@ def test_one_scene_alone_equals_the_same_scene_in_a_batch(tmp_path):
 def test_several_scenes_need_one_start_grid(tmp_path, capsys):
     small = write_scene(tmp_path, Path(SCENE).read_text() + "\n[settings]\nstart_grid = [2, 2]\n")
     _one_line_error(capsys, ["evaluate", SCENE, str(small), "--json", str(tmp_path / "x")],
-                    "start_grid", "one start grid")
+                    str(small), "start_grid", "same number of start poses")
     assert not (tmp_path / "x").exists()
 
 
