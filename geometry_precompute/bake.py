@@ -43,6 +43,25 @@ gripper_opening,
 gripper_palm_radius
 ==================  ==========  ===============================================
 
+The ``optimized`` mode's search (SPEC section 17) builds spaces for any parameter
+vector on the accelerator. Every template's space is affine in its shrinkable
+parameters q (P = 2 slots: the most any template has), so the bake carries that map:
+
+==================  ==========  ===============================================
+q_mask              (S, T, P)   True for a real parameter of a real task
+q_min, q_init,      (S, T, P)   its bounds and Shrinking's value (0 where masked)
+q_shrunk
+center_dq           (S, T, 3, P)  d centre / d q: centre(q) = center_init +
+                                center_dq (q - q_init)
+dims_dq             (S, T, 3, P)  d dims / d q, the same way
+opt_starts          (S, No, 7)  the search's own start poses (``optimize_starts``,
+                                ``optimize_seed``; padded to the batch's largest)
+opt_start_mask      (S, No)     True for a real search start
+optimize_seed,      (S,)        the search's settings; population and
+optimize_population,            generations must agree across a batch (they
+optimize_generations            are static sizes of its program)
+==================  ==========  ===============================================
+
 Metadata for people (names, task ids, C values) rides along in ``meta`` and
 is never passed to JAX.
 """
@@ -57,8 +76,8 @@ import numpy as np
 from .errors import InputError
 from .precompute import PrecomputeResult
 from .shapes import KIND_CODES
-from .starts import start_poses
-from .templates import object_body
+from .starts import optimize_start_poses, start_poses
+from .templates import TaskSpace, object_body
 
 ARRAY_FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt",
                 "quat_opt", "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis",
@@ -66,6 +85,10 @@ ARRAY_FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "c
 PARAM_FIELDS = ("dt", "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest",
                 "collision", "gripper_finger_length", "gripper_finger_radius", "gripper_opening",
                 "gripper_palm_radius")
+SEARCH_FIELDS = ("q_mask", "q_min", "q_init", "q_shrunk", "center_dq", "dims_dq", "opt_starts",
+                 "opt_start_mask", "optimize_seed", "optimize_population",
+                 "optimize_generations")
+MAX_PARAMS = 2  # shrinkable parameters of one template, at most (handle_grasp: L, alpha)
 GRIPPER_FIELDS = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",
                   "gripper_palm_radius")
 _PAD_DIMS = (0.01, 0.01, 0.01)
@@ -102,6 +125,17 @@ class BakedScenes:
     gripper_finger_radius: np.ndarray
     gripper_opening: np.ndarray
     gripper_palm_radius: np.ndarray
+    q_mask: np.ndarray
+    q_min: np.ndarray
+    q_init: np.ndarray
+    q_shrunk: np.ndarray
+    center_dq: np.ndarray
+    dims_dq: np.ndarray
+    opt_starts: np.ndarray
+    opt_start_mask: np.ndarray
+    optimize_seed: np.ndarray
+    optimize_population: np.ndarray
+    optimize_generations: np.ndarray
     meta: dict = field(default_factory=dict, compare=False)
 
     @property
@@ -117,7 +151,60 @@ class BakedScenes:
         return self.starts.shape[1]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in ARRAY_FIELDS + PARAM_FIELDS}
+        return {k: getattr(self, k) for k in ARRAY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS}
+
+
+def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:
+    """(d centre / d q, d dims / d q), each (3, P), of a template's space, read off the
+    shapes at the bounds; checked at the midpoint, so a template whose space is not
+    affine in its parameters cannot be baked silently wrong."""
+    base = space.shape()
+    dc, dd = np.zeros((3, MAX_PARAMS)), np.zeros((3, MAX_PARAMS))
+    for k in range(len(space.param_names)):
+        step = space.q_min[k] - space.q_init[k]
+        if step == 0.0:  # a fixed parameter: the search cannot move it
+            continue
+        q = space.q_init.copy()
+        q[k] = space.q_min[k]
+        moved = space.shape(q)
+        dc[:, k] = (np.subtract(moved.center, base.center)) / step
+        dd[:, k] = (np.subtract(moved.dims, base.dims)) / step
+    mid = (space.q_min + space.q_init) / 2.0
+    shape = space.shape(mid)
+    dq = np.zeros(MAX_PARAMS)
+    dq[:len(mid)] = mid - space.q_init
+    if not (np.allclose(shape.center, np.add(base.center, dc @ dq), rtol=0, atol=1e-9)
+            and np.allclose(shape.dims, np.add(base.dims, dd @ dq), rtol=0, atol=1e-9)):
+        raise InputError(source, f"tasks[{space.task.id}].template",
+                         f"{space.template}'s space is not affine in its parameters; the "
+                         "optimized mode cannot bake it")
+    return dc, dd
+
+
+def _search_fields(results: Sequence[PrecomputeResult], T: int) -> dict[str, np.ndarray]:
+    S = len(results)
+    opt = [optimize_start_poses(r.scene, r.settings) for r in results]
+    No = max(len(o) for o in opt)
+    out = {"q_mask": np.zeros((S, T, MAX_PARAMS), bool),
+           "center_dq": np.zeros((S, T, 3, MAX_PARAMS)),
+           "dims_dq": np.zeros((S, T, 3, MAX_PARAMS)),
+           "opt_starts": np.tile([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (S, No, 1)),
+           "opt_start_mask": np.zeros((S, No), bool)}
+    for k in ("q_min", "q_init", "q_shrunk"):
+        out[k] = np.zeros((S, T, MAX_PARAMS))
+    for k in ("optimize_seed", "optimize_population", "optimize_generations"):
+        out[k] = np.array([r.settings[k] for r in results], np.int64)
+    for si, r in enumerate(results):
+        out["opt_starts"][si, :len(opt[si])] = opt[si]
+        out["opt_start_mask"][si, :len(opt[si])] = True
+        for ti, (space, q) in enumerate(zip(r.spaces, r.q_opt, strict=True)):
+            n = len(space.param_names)
+            out["q_mask"][si, ti, :n] = True
+            out["q_min"][si, ti, :n] = space.q_min
+            out["q_init"][si, ti, :n] = space.q_init
+            out["q_shrunk"][si, ti, :n] = q
+            out["center_dq"][si, ti], out["dims_dq"][si, ti] = _affine_map(space, r.scene.source)
+    return out
 
 
 def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
@@ -221,4 +308,5 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         "C_init": np.array([r.C_init for r in results]),
         "C_final": np.array([r.C_final for r in results]),
     }
-    return BakedScenes(starts=starts_arr, meta=meta, **out, **params)
+    return BakedScenes(starts=starts_arr, meta=meta, **out, **params,
+                       **_search_fields(results, T))

@@ -11,6 +11,8 @@ it changes:
 - ``precompute``: the CPU geometry (spaces, C, clusters, Shrinking);
 - ``starts``: the start poses (cheap NumPy, part of the bake);
 - ``rollout``: numeric inputs of the jitted evaluation (never recompiles);
+- ``optimize``: the search of the ``optimized`` mode (SPEC section 17; its starts are
+  part of the bake, its sizes are static shapes of the search's program);
 - ``analysis``: statistics only.
 """
 
@@ -105,6 +107,12 @@ _SPECS: list[SettingSpec] = [
     _spec("entropy_variant", "formula", "choice", "precompute",
           _choice("formula", "reference_code"), ("formula", "reference_code")),
     _spec("bootstrap_resamples", 10000, "int", "analysis", _range(100, 10**7)),
+    # The optimized mode's search (SPEC section 17). A population of at least 4 is what
+    # CMA-ES needs to adapt; the products of these sizes bound the search's work.
+    _spec("optimize_starts", 64, "int", "optimize", _range(1, 1 << 16)),
+    _spec("optimize_seed", 1, "int", "optimize", _range(0, INT32_MAX)),
+    _spec("optimize_population", 64, "int", "optimize", _range(4, 4096)),
+    _spec("optimize_generations", 30, "int", "optimize", _range(1, 10000)),
     # Template defaults (SPEC section 3's table).
     _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN),
     _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN),
@@ -149,6 +157,10 @@ _DOCS = {
     "mesh_sections": "sections of the meshes used for the clutteredness booleans",
     "entropy_variant": "entropic clutteredness h: formula (paper) or reference_code",
     "bootstrap_resamples": "resamples of the bootstrap confidence intervals",
+    "optimize_starts": "optimized mode: start poses the search scores candidates on",
+    "optimize_seed": "optimized mode: seed of the search's starts and of its random draws",
+    "optimize_population": "optimized mode: candidates per generation of the search",
+    "optimize_generations": "optimized mode: generations of the search",
     "side_grasp.radius_init": "side grasp cylinder's initial radius, m",
     "side_grasp.radius_margin": "side grasp's smallest radius is object radius + this, m",
     "side_grasp.height_margin": "side grasp cylinder reaches this far above the object, m",

@@ -7,11 +7,24 @@ import jax
 from .evaluation import evaluate, evaluate_on_devices, evaluate_sharded
 from .metrics import batch_metrics as _batch_metrics
 from .montecarlo import clutteredness_mc
-from .types import MODES, OUTCOMES, Evaluation, Rollouts, SceneMetrics, Scenes, Spaces
+from .types import (
+    ALL_MODES,
+    MODES,
+    OPTIMIZED,
+    OUTCOMES,
+    Evaluation,
+    Rollouts,
+    SceneMetrics,
+    Scenes,
+    Search,
+    SearchProblem,
+    Spaces,
+)
 
 # Per-scene metrics of rollouts joined from pieces (sweeps.memory), as one program.
 batch_metrics = jax.jit(_batch_metrics)
 
-__all__ = ["MODES", "OUTCOMES", "Evaluation", "Rollouts", "SceneMetrics", "Scenes", "Spaces",
+__all__ = ["ALL_MODES", "MODES", "OPTIMIZED", "OUTCOMES", "Evaluation", "Rollouts", "SceneMetrics",
+           "Scenes", "Search", "SearchProblem", "Spaces",
            "batch_metrics", "clutteredness_mc", "evaluate", "evaluate_on_devices",
            "evaluate_sharded"]

@@ -51,7 +51,7 @@ def _numbers(sc: Scenes):
                 grow=tau + am.rounding_slack(dtype), max_angle=sc.omega_max * sc.dt)
 
 
-def _activation_pass(sc: Scenes, which: str):
+def activation_pass(sc: Scenes, which: str):
     """Phase 1 for one scene: (path, activation, outcome), each (N, T, ...)."""
     x = _numbers(sc)
     spaces = sc.spaces(which)
@@ -324,9 +324,9 @@ def _evaluate(scenes: Scenes, modes: tuple[str, ...], block_size: int, chunk: in
               collide: bool = False, boxes: bool = False, meta: str = "general") -> Evaluation:
     passes = {}
     if "baseline" in modes:
-        passes["init"] = jax.vmap(lambda sc: _activation_pass(sc, "init"))(scenes)
+        passes["init"] = jax.vmap(lambda sc: activation_pass(sc, "init"))(scenes)
     if "shrinking" in modes or "shacc" in modes:
-        passes["opt"] = jax.vmap(lambda sc: _activation_pass(sc, "opt"))(scenes)
+        passes["opt"] = jax.vmap(lambda sc: activation_pass(sc, "opt"))(scenes)
     S, N = scenes.starts.shape[:2]
     T = scenes.task_mask.shape[1]
     r0 = jnp.broadcast_to(scenes.starts[:, :, None, 3:], (S, N, T, 4))

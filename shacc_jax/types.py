@@ -15,6 +15,10 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 MODES = ("baseline", "shrinking", "shacc")
+# The fourth mode (SPEC section 17): shacc's rules on the spaces that the search found.
+# ``evaluate`` computes MODES; ``optimized`` needs the search first (shacc_jax.optimize).
+OPTIMIZED = "optimized"
+ALL_MODES = (*MODES, OPTIMIZED)
 OUTCOMES = ("success", "wrong", "ambiguous", "timeout", "collision")
 SUCCESS, WRONG, AMBIGUOUS, TIMEOUT, COLLISION = range(5)
 INVALID = -1  # the rollout's intended task is a padded (masked) task
@@ -67,17 +71,7 @@ class Scenes(NamedTuple):
         """Read the bake's arrays by name (any object with those attributes, or a
         mapping); floats are cast to ``dtype`` (default: float64 when jax_enable_x64
         is on, else float32)."""
-        dtype = dtype or jnp.zeros(()).dtype
-        get = baked.__getitem__ if isinstance(baked, dict) else lambda k: getattr(baked, k)
-        out = {}
-        for name in cls._fields:
-            a = np.asarray(get(name))
-            if a.dtype.kind == "f":
-                a = a.astype(dtype)
-            elif a.dtype.kind in "iu":
-                a = a.astype(np.int32)
-            out[name] = jnp.asarray(a)
-        return cls(**out)
+        return _read_bake(cls, baked, dtype)
 
     def gripper(self) -> Float[Array, "... 4"]:
         """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
@@ -94,6 +88,52 @@ class Scenes(NamedTuple):
         from .shapes import prepare_all
 
         return prepare_all(*self.raw_spaces(which))
+
+
+def _read_bake(cls, baked, dtype=None):
+    """``cls``'s fields read from the bake by name, floats cast to ``dtype``."""
+    dtype = dtype or jnp.zeros(()).dtype
+    get = baked.__getitem__ if isinstance(baked, dict) else lambda k: getattr(baked, k)
+    out = {}
+    for name in cls._fields:
+        a = np.asarray(get(name))
+        if a.dtype.kind == "f":
+            a = a.astype(dtype)
+        elif a.dtype.kind in "iu":
+            a = a.astype(np.int32)
+        out[name] = jnp.asarray(a)
+    return cls(**out)
+
+
+class SearchProblem(NamedTuple):
+    """What the optimized mode's search needs beyond :class:`Scenes` (the bake's
+    search fields; P = 2 parameter slots per task, No search starts)."""
+
+    q_mask: Bool[Array, "S T P"]
+    q_min: Float[Array, "S T P"]
+    q_init: Float[Array, "S T P"]
+    q_shrunk: Float[Array, "S T P"]
+    center_dq: Float[Array, "S T 3 P"]
+    dims_dq: Float[Array, "S T 3 P"]
+    opt_starts: Float[Array, "S No 7"]
+    opt_start_mask: Bool[Array, "S No"]
+    optimize_seed: Int[Array, " S"]
+
+    @classmethod
+    def from_bake(cls, baked, dtype=None) -> SearchProblem:
+        return _read_bake(cls, baked, dtype)
+
+
+class Search(NamedTuple):
+    """The search's result per scene (leading axis S). The objective is u_scene under
+    the shrinking rules on the search's own starts (never the evaluation grid)."""
+
+    q: Float[Array, "S T P"]                # the best candidate's parameters
+    objective: Float[Array, " S"]           # its u_scene on the search starts
+    volume: Float[Array, " S"]              # its spaces' summed volume, m^3
+    objective_init: Float[Array, " S"]      # the initial spaces' u_scene, same starts
+    objective_shrunk: Float[Array, " S"]    # Shrinking's
+    history: Float[Array, "S G"]            # best objective so far, per generation
 
 
 class Rollouts(NamedTuple):

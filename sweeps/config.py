@@ -130,9 +130,9 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     if not isinstance(name, str) or not name:
         raise InputError(src, "name", "must be a non-empty string")
     modes = data.get("modes", list(shacc_jax.MODES))
-    if not isinstance(modes, list) or not modes or any(m not in shacc_jax.MODES for m in modes) \
-            or len(set(modes)) != len(modes):
-        raise InputError(src, "modes", f"must be distinct names from {list(shacc_jax.MODES)}")
+    if not isinstance(modes, list) or not modes \
+            or any(m not in shacc_jax.ALL_MODES for m in modes) or len(set(modes)) != len(modes):
+        raise InputError(src, "modes", f"must be distinct names from {list(shacc_jax.ALL_MODES)}")
     chunk = _int(data.get("chunk", 32), src, "chunk", 1)
     raw = data.get("source")
     if not isinstance(raw, Mapping) or "kind" not in raw:

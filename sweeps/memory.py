@@ -71,6 +71,15 @@ def _size(n: float) -> str:
     return f"{int(n)} bytes"
 
 
+def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
+    """Scenes the optimized mode's search may take in one call: each holds population x
+    search starts x tasks activation rollouts at once."""
+    limit = budget() if limit is None else limit
+    per_scene = BYTES_PER_ROLLOUT * int(np.max(baked.optimize_population)) * \
+        baked.opt_starts.shape[1] * baked.n_tasks
+    return max(1, limit // per_scene)
+
+
 def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
                        limit: int | None = None) -> Evaluation:
     """``evaluate(baked, modes)`` (default ``shacc_jax.evaluate_on_devices``) as NumPy

@@ -5,19 +5,20 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 import shacc_jax
 from geometry_precompute import (
     BakedScenes,
+    InputError,
     PrecomputeResult,
     bake,
 )
-from shacc_jax.types import OUTCOMES, Evaluation
+from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
 
-from .memory import evaluate_in_pieces
+from . import memory
 from .output import precompute_json
 
 
@@ -28,17 +29,61 @@ class Evaluated:
     evaluation: Evaluation  # NumPy arrays
     modes: tuple[str, ...]
     seconds: dict
+    search: Search | None = None  # the optimized mode's search (NumPy), when asked for
+
+
+def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) -> Evaluation:
+    """One evaluation whose mode axis (1) is ``modes``, from mode -> (evaluation, index)."""
+    def pick(get):
+        return np.concatenate([np.asarray(get(parts[m][0]))[:, parts[m][1]:parts[m][1] + 1]
+                               for m in modes], axis=1)
+    ev0 = next(iter(parts.values()))[0]
+    rollouts = type(ev0.rollouts)(*(pick(lambda e, k=k: e.rollouts[k])
+                                    for k in range(len(ev0.rollouts))))
+    metrics = type(ev0.metrics)(*(pick(lambda e, k=k: e.metrics[k])
+                                  for k in range(len(ev0.metrics))))
+    return Evaluation(rollouts, metrics)
+
+
+def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
+                   found: Search | None = None) -> tuple[Evaluation, Search | None]:
+    """Every mode of ``modes`` (shacc_jax.ALL_MODES) for a bake, as NumPy arrays in that
+    order, and the search when ``optimized`` is among them: the search runs on its own
+    starts, then its spaces replace the optimised ones and the scene's usual starts are
+    evaluated under shacc's rules (SPEC section 17). ``found``: a search already run for
+    these scenes (its parameters are used, no search runs)."""
+    modes = tuple(modes)
+    plain = tuple(m for m in modes if m != OPTIMIZED)
+    parts: dict[str, tuple[Evaluation, int]] = {}
+    if plain:
+        ev = memory.evaluate_in_pieces(baked, plain, evaluate)
+        parts.update({m: (ev, i) for i, m in enumerate(plain)})
+    found = None
+    if OPTIMIZED in modes:
+        from shacc_jax.optimize import optimized_spaces, search, search_sizes
+
+        try:
+            search_sizes(baked)
+        except ValueError as e:
+            raise InputError("<batch>", "optimize_population/optimize_generations",
+                             str(e)) from None
+        if found is None:
+            found = search(baked, memory.search_scenes_per_call(baked))
+        center, dims = optimized_spaces(baked, found)
+        best = replace(baked, center_opt=center, dims_opt=dims)
+        parts[OPTIMIZED] = (memory.evaluate_in_pieces(best, ("shacc",), evaluate), 0)
+    return _join_modes(parts, modes), found
 
 
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
-                     max_tasks: int | None = None) -> Evaluated:
+                     max_tasks: int | None = None, found: Search | None = None) -> Evaluated:
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
-    ev = evaluate_in_pieces(baked, tuple(modes), shacc_jax.evaluate)
+    ev, found = evaluate_baked(baked, modes, shacc_jax.evaluate, found)
     t2 = time.perf_counter()
     return Evaluated(list(results), baked, ev, tuple(modes),
-                     {"bake": t1 - t0, "evaluate": t2 - t1})
+                     {"bake": t1 - t0, "evaluate": t2 - t1}, found)
 
 
 def _none_if_nan(x: float):
@@ -66,4 +111,29 @@ def scene_json(ev: Evaluated, s: int) -> dict:
             "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
         }
     out["modes"] = modes
+    if ev.search is not None:
+        out["optimize"] = optimize_json(ev, s)
     return out
+
+
+def optimized_params(ev: Evaluated, s: int) -> dict[str, dict[str, float]]:
+    """The search's parameters of scene ``s``, per task id and parameter name."""
+    r = ev.results[s]
+    return {sp.task.id: {n: float(ev.search.q[s, t, k]) for k, n in enumerate(sp.param_names)}
+            for t, sp in enumerate(r.spaces)}
+
+
+def optimize_json(ev: Evaluated, s: int) -> dict:
+    """The ``optimize`` block of SPEC section 12a's object (section 17)."""
+    f, st = ev.search, ev.results[s].settings
+    return {
+        "params": optimized_params(ev, s),
+        "objective": {"init": float(f.objective_init[s]),
+                      "shrinking": float(f.objective_shrunk[s]),
+                      "optimized": float(f.objective[s]),
+                      "per_generation": [float(v) for v in f.history[s]]},
+        "volume": float(f.volume[s]),
+        "search_starts": ev.baked.opt_starts[s][ev.baked.opt_start_mask[s]].tolist(),
+        "settings": {k: st[k] for k in ("optimize_starts", "optimize_seed",
+                                        "optimize_population", "optimize_generations")},
+    }

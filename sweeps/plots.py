@@ -12,7 +12,8 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from scipy.spatial import ConvexHull
 
-MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c"}
+MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c",
+               "optimized": "#9467bd"}
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
 
 

@@ -44,6 +44,7 @@ from shacc_jax.types import OUTCOMES
 from . import memory
 from .config import SweepConfig
 from .output import check_output_dir, write_atomic, write_json
+from .pipeline import evaluate_baked
 from .workers import precompute_pool
 
 # For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
@@ -299,7 +300,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
             # One task count for every chunk, so chunks of a point share one compilation.
             baked = bake(results, max_tasks)
             t = lap("bake", t)
-            ev = memory.evaluate_in_pieces(baked, cfg.modes)
+            ev, _ = evaluate_baked(baked, cfg.modes)
             t = lap("evaluate", t)
             scenes_df, rollouts_df = _tables(cfg, c, results, ev)
             t = lap("tables", t)

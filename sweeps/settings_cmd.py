@@ -22,5 +22,6 @@ def cmd_settings(args) -> int:
     print("\nA setting goes in a scene's [settings], a sweep's [settings], [axes] or "
           "[[points]], or on the command line as --set NAME=VALUE. Dotted names may be "
           "written bare or quoted in TOML. The stage says what a change recomputes: "
-          "precompute (the geometry), starts, rollout, analysis.")
+          "precompute (the geometry), starts, rollout, optimize (the optimized mode's "
+          "search), analysis.")
     return 0

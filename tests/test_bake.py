@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from geometry_precompute import InputError, bake, precompute, random_scene
-from geometry_precompute.bake import ARRAY_FIELDS, PARAM_FIELDS
+from geometry_precompute.bake import ARRAY_FIELDS, PARAM_FIELDS, SEARCH_FIELDS
 from geometry_precompute.settings import DEFAULTS
 
 
@@ -17,7 +17,7 @@ def test_bake_shapes_and_padding(shipped_results):
     assert b.center_init.shape == (S, T, 3) and b.quat_opt.shape == (S, T, 4)
     assert b.task_mask[:, :3].all() and not b.task_mask[:, 3:].any()
     assert (b.cluster[:, 3:] == -1).all()
-    for k in ARRAY_FIELDS + PARAM_FIELDS:
+    for k in ARRAY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS:
         assert np.all(np.isfinite(getattr(b, k).astype(float))), k
     np.testing.assert_allclose(np.linalg.norm(b.quat_init, axis=-1), 1.0)
 

@@ -203,7 +203,7 @@ def test_cli_mode_names_are_the_evaluators():
     import shacc_jax
     from sweeps import cli
 
-    assert cli.MODES == shacc_jax.MODES
+    assert cli.MODES == shacc_jax.ALL_MODES and cli.PAPER_MODES == shacc_jax.MODES
 
 
 def test_precompute_command_does_not_import_jax(tmp_path):

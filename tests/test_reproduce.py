@@ -15,8 +15,11 @@ def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
     readme = tmp_path_factory.mktemp("readme") / "README.md"  # not in --out: not its file
     readme.write_text(f"# x\n\n{README_BEGIN}\nold\n{README_END}\n\ntail\n")
+    # A small search (the optimized mode's defaults are measured in benchmarks).
     assert main(["reproduce", "--quick", "--random-scenes", "2", "--field-grid", "6",
-                 "--workers", "1", "--out", str(out), "--readme", str(readme)]) == 0
+                 "--workers", "1", "--out", str(out), "--readme", str(readme),
+                 "--set", "optimize_population=8", "--set", "optimize_generations=3",
+                 "--set", "optimize_starts=16"]) == 0
     return out, readme
 
 
@@ -30,13 +33,17 @@ def test_summary_keys(quick_run):
     for c in CATEGORIES:
         cat = s["categories"][c]
         assert "n_scenes" in cat
-        for mode in ("baseline", "shrinking", "shacc"):
+        for mode in ("baseline", "shrinking", "shacc", "optimized"):
             assert set(cat[mode]) == {"u_scene", "delta_R", "C_final"}
             assert set(cat[mode]["u_scene"]) >= {"mean", "ci"}
+        # The search is never worse than Shrinking on its own starts.
+        assert cat["search_gain"]["mean"] is None or cat["search_gain"]["mean"] >= 0
+        assert set(cat["optimized_gain"]) >= {"mean", "ci"}
     assert s["categories"]["all"]["n_scenes"] == len(s["scenes"]) == 14
     scene = s["scenes"][0]
     assert set(scene) >= {"name", "set", "category", "C_init", "C_final", "d", "h",
-                          "baseline", "shrinking", "shacc"}
+                          "baseline", "shrinking", "shacc", "optimized", "C_optimized",
+                          "search_objective"}
     assert set(scene["shacc"]) == {"u_scene", "delta_R_mean"}
     assert s["settings"]["software"]["jax"] and s["settings"]["bootstrap_resamples"] == 200
 
@@ -61,6 +68,8 @@ def test_report_figures_and_readme(quick_run):
     report = (out / "report.md").read_text()
     assert "| rho(C, u_scene baseline) | -0.53 [-0.72, -0.27] |" in report
     assert "**(c) success rate u_scene**" in report
+    assert "| category | n | baseline | shrinking | shacc | optimized |" in report
+    assert "How far is Shrinking from the best sizes?" in report
     for name in ("fig6a_correlation", "fig6b_c_final", "fig6c_success", "fig6d_delta_r",
                  "fig7_success_fields"):
         png = out / f"{name}.png"

@@ -22,9 +22,12 @@ def test_every_spec_name_present():
              "handle_grasp.half_angle_init", "handle_grasp.half_angle_min",
              "handle_grasp.handle_offset", "top_grasp.radius_init", "top_grasp.radius_margin",
              "top_grasp.offset", "top_grasp.thickness", "drawer_pull.depth_init",
-             "drawer_pull.depth_min"}
+             "drawer_pull.depth_min", "optimize_starts", "optimize_seed",
+             "optimize_population", "optimize_generations"}
     assert set(SPECS) == names
     assert DEFAULTS["dt"] == 0.02 and DEFAULTS["start_grid"] == (6, 6)
+    assert (DEFAULTS["optimize_starts"], DEFAULTS["optimize_seed"],
+            DEFAULTS["optimize_population"], DEFAULTS["optimize_generations"]) == (64, 1, 64, 30)
     assert DEFAULTS["handle_grasp.half_angle_init"] == pytest.approx(0.5236, abs=1e-4)
 
 

@@ -211,3 +211,29 @@ def test_task_counts_without_building_match_the_built_scenes(tmp_path):
                                                 "tasks": [3, 9], "seed": 40}},
                        "<test>", tmp_path)
     assert cfg.task_counts() == [len(s.tasks) for s in cfg.scenes()]
+
+
+def test_sweep_with_the_optimized_mode(tmp_path):
+    """modes = [..., "optimized"] and an axis over a search setting: each point's row
+    equals a direct evaluation of the same scene and settings."""
+    from sweeps.pipeline import evaluate_results
+
+    text = CONFIG.replace('name = "tiny"', 'name = "tiny"\nmodes = ["shrinking", "optimized"]')
+    text = text.replace("count = 3", "count = 2").replace("v_max = [0.15, 0.3]",
+                                                          "optimize_population = [4, 8]")
+    text += "[settings]\noptimize_generations = 3\noptimize_starts = 8\n"
+    cfg = load_config(write(tmp_path, text))
+    out = tmp_path / "out"
+    summary = run_sweep(cfg, out, tmp_path / "cache", workers=1, progress=False)
+    assert summary["status"] == "complete"
+    scenes = pd.read_parquet(out / "scenes.parquet")
+    rollouts = pd.read_parquet(out / "rollouts.parquet")
+    assert set(rollouts["mode"]) == {"shrinking", "optimized"}
+    row = scenes[(scenes.point == 1) & (scenes.scene_index == 1)].iloc[0]
+    scene = random_scene(5 + 1, "gaussian", 3, 3)
+    r = precompute(scene, scene.settings(overrides={
+        "optimize_population": 8, "optimize_generations": 3, "optimize_starts": 8,
+        "start_grid": [2, 2]}))
+    ev = evaluate_results([r], ("shrinking", "optimized"))
+    for m, mode in enumerate(("shrinking", "optimized")):
+        assert row[f"{mode}.success"] == pytest.approx(float(ev.evaluation.metrics.u_scene[0, m]))
