@@ -77,7 +77,12 @@ def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
     limit = budget() if limit is None else limit
     per_scene = BYTES_PER_ROLLOUT * int(np.max(baked.optimize_population)) * \
         baked.opt_starts.shape[1] * baked.n_tasks
-    return max(1, limit // per_scene)
+    if per_scene > limit:
+        raise InputError("<memory>", "optimize_population x optimize_starts", "the search "
+                         f"of one scene ({baked.n_tasks} tasks) needs {_size(per_scene)}, "
+                         f"more than the budget of {_size(limit)}; lower them or raise "
+                         f"${ENV}")
+    return limit // per_scene
 
 
 def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,

@@ -207,3 +207,14 @@ def test_a_scenes_search_does_not_depend_on_its_batch(small_search, shipped_resu
     np.testing.assert_array_equal(alone.q[0], found.q[9])
     np.testing.assert_array_equal(together.q[0, :3], found.q[4])
     np.testing.assert_array_equal(together.history[2], found.history[9])
+
+
+def test_a_search_too_large_for_memory_is_refused_before_it_starts(shipped_results):
+    from sweeps import memory
+
+    r = precompute(shipped_results[0].scene, shipped_results[0].settings.with_overrides(
+        {"optimize_population": 4096, "optimize_starts": 65536}))
+    baked = bake([r])
+    with pytest.raises(InputError, match="optimize_population x optimize_starts"):
+        memory.search_scenes_per_call(baked, limit=2**30)
+    assert memory.search_scenes_per_call(bake([shipped_results[0]]), limit=2**30) >= 1
