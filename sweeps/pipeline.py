@@ -58,16 +58,15 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     if plain:
         ev = memory.evaluate_in_pieces(baked, plain, evaluate)
         parts.update({m: (ev, i) for i, m in enumerate(plain)})
-    found = None
     if OPTIMIZED in modes:
         from shacc_jax.optimize import optimized_spaces, search, search_sizes
 
-        try:
-            search_sizes(baked)
-        except ValueError as e:
-            raise InputError("<batch>", "optimize_population/optimize_generations",
-                             str(e)) from None
         if found is None:
+            try:
+                search_sizes(baked)
+            except ValueError as e:
+                raise InputError("<batch>", "optimize_population/optimize_generations",
+                                 str(e)) from None
             found = search(baked, memory.search_scenes_per_call(baked))
         center, dims = optimized_spaces(baked, found)
         best = replace(baked, center_opt=center, dims_opt=dims)

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from reference_automaton import rollout
+from reference_automaton import OUTCOME_NAMES, rollout
 
 from geometry_precompute import (
     InputError,
@@ -22,7 +22,8 @@ from geometry_precompute import (
     scene_from_dict,
     shipped_scene_paths,
 )
-from shacc_jax.optimize import _objective, optimized_spaces, search, spaces_at
+from shacc_jax import optimize
+from shacc_jax.optimize import _PER_TASK, _objective, optimized_spaces, search, spaces_at
 from shacc_jax.types import Scenes, SearchProblem
 from sweeps.cli import main
 from sweeps.pipeline import evaluate_baked
@@ -143,8 +144,7 @@ def test_optimized_mode_is_shacc_on_the_found_spaces(small_search):
         for n in range(baked.n_starts):
             for t in range(len(results[s].spaces)):
                 ref = rollout(best, s, "shacc", n, t)
-                assert ev.rollouts.outcome[s, 1, n, t] == ["success", "wrong", "ambiguous",
-                                                           "timeout"].index(ref.outcome)
+                assert OUTCOME_NAMES[ev.rollouts.outcome[s, 1, n, t]] == ref.outcome
                 assert ev.rollouts.step[s, 1, n, t] == ref.step
 
 
@@ -218,3 +218,26 @@ def test_a_search_too_large_for_memory_is_refused_before_it_starts(shipped_resul
     with pytest.raises(InputError, match="optimize_population x optimize_starts"):
         memory.search_scenes_per_call(baked, limit=2**30)
     assert memory.search_scenes_per_call(bake([shipped_results[0]]), limit=2**30) >= 1
+
+
+def test_a_given_search_is_used_not_run_again(small_search, monkeypatch):
+    """``evaluate_baked(..., found=...)`` (reproduce's finer field grid) evaluates the
+    given parameters and never searches."""
+    _, baked, found = small_search
+    ref, _ = evaluate_baked(baked, ("optimized",))
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("searched again")
+
+    monkeypatch.setattr(optimize, "search", no_search)
+    again, used = evaluate_baked(baked, ("optimized",), found=found)
+    assert used is found
+    np.testing.assert_array_equal(again.rollouts.outcome, ref.rollouts.outcome)
+
+
+def test_cut_knows_every_per_task_field():
+    """The fields ``search`` cuts to a group's task count are exactly those whose second
+    axis is the tasks, by their annotations."""
+    for cls in (Scenes, SearchProblem):
+        for name, ann in cls.__annotations__.items():
+            assert ("S T" in str(ann)) == (name in _PER_TASK), name
