@@ -2,8 +2,10 @@
 clusters, Shrinking, C_final and d, h, then the bake, on one core.
 
     python benchmarks/bench_precompute.py [--scenes 20] [--sections 32]
+    python benchmarks/bench_precompute.py --shipped
 
-Prints the median and quartiles over the scenes, per stage. Pins itself to one CPU
+Prints the median and quartiles over the scenes, per stage; ``--shipped`` instead
+times each shipped and extra scene (median of 7 runs). Pins itself to one CPU
 where the platform allows. Nothing here asserts a speed.
 """
 
@@ -23,10 +25,15 @@ def main() -> None:
     p.add_argument("--scenes", type=int, default=20)
     p.add_argument("--tasks", type=int, default=10)
     p.add_argument("--sections", type=int, default=None)
+    p.add_argument("--shipped", action="store_true")
     args = p.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     from geometry_precompute import DEFAULTS, bake, precompute, random_scene
+
+    if args.shipped:
+        shipped()
+        return
 
     settings = DEFAULTS if args.sections is None else DEFAULTS.with_overrides(
         {"mesh_sections": args.sections})
@@ -48,6 +55,29 @@ def main() -> None:
         "quartiles_ms": [1e3 * q[0], 1e3 * q[2]], "max_ms": 1e3 * max(totals),
         "stage_median_ms": {k: round(1e3 * statistics.median(v), 2) for k, v in stages.items()},
     }, indent=1))
+
+
+def shipped() -> None:
+    from geometry_precompute import (
+        bake,
+        extra_scene_paths,
+        load_scene,
+        precompute,
+        shipped_scene_paths,
+    )
+
+    out = {}
+    for path in shipped_scene_paths() + extra_scene_paths():
+        sc = load_scene(path)
+        precompute(sc)
+        times = []
+        for _ in range(7):
+            t0 = time.perf_counter()
+            bake([precompute(sc)])
+            times.append(time.perf_counter() - t0)
+        out[sc.name] = round(1e3 * statistics.median(times), 2)
+    print(json.dumps({"ms": out, "median_over_scenes_ms": statistics.median(out.values())},
+                     indent=1))
 
 
 if __name__ == "__main__":

@@ -173,8 +173,9 @@ def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:
     shape = space.shape(mid)
     dq = np.zeros(MAX_PARAMS)
     dq[:len(mid)] = mid - space.q_init
-    if not (np.allclose(shape.center, np.add(base.center, dc @ dq), rtol=0, atol=1e-9)
-            and np.allclose(shape.dims, np.add(base.dims, dd @ dq), rtol=0, atol=1e-9)):
+    err = np.max(np.abs(np.concatenate([np.subtract(shape.center, np.add(base.center, dc @ dq)),
+                                        np.subtract(shape.dims, np.add(base.dims, dd @ dq))])))
+    if not err <= 1e-9:  # also when NaN
         raise InputError(source, f"tasks[{space.task.id}].template",
                          f"{space.template}'s space is not affine in its parameters; the "
                          "optimized mode cannot bake it")

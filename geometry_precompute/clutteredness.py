@@ -1,9 +1,16 @@
 """Clutteredness C (SPEC section 5, the paper's eq. 1).
 
-C = sum_{i<j} V(p_i ∩ p_j) / sum_i V(p_i), with the intersections computed
-by manifold3d's boolean on the meshes of :mod:`geometry_precompute.meshes`,
-and the denominator's volumes taken from the same meshes. A pair whose
-bounding boxes are disjoint is skipped without a boolean.
+C = sum_{i<j} V(p_i ∩ p_j) / sum_i V(p_i). Two ways to get the numerator:
+
+- ``method="fast"`` (what the precompute uses): the pairs that
+  :mod:`geometry_precompute.overlap` covers (upright cylinders and disks, level
+  cones with them) exactly or by quadrature, every other pair by manifold3d's
+  boolean on the meshes of :mod:`geometry_precompute.meshes`; the denominator is the
+  exact volumes;
+- ``method="boolean"``: every pair by the boolean and the denominator from the same
+  meshes, the reference the fast paths are tested against.
+
+A pair whose bounding boxes are disjoint is skipped.
 """
 
 from __future__ import annotations
@@ -11,36 +18,49 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 
 from .meshes import shape_manifold
+from .overlap import fast_volumes
 from .shapes import Shape
+
+METHODS = ("fast", "boolean")
+
+
+def _boxes_overlap(a: Shape, b: Shape) -> bool:
+    (alo, ahi), (blo, bhi) = a.aabb(), b.aabb()
+    return bool((alo <= bhi).all() and (blo <= ahi).all())
 
 
 def overlap_volumes(shapes: Sequence[Shape], sections: int,
-                    candidates: Iterable[tuple[int, int]] | None = None) -> tuple[list, dict]:
-    """(mesh volumes, {(i, j): intersection volume} for pairs whose boxes overlap).
+                    candidates: Iterable[tuple[int, int]] | None = None,
+                    method: str = "fast") -> tuple[list, dict]:
+    """(volumes, {(i, j): intersection volume}) for the candidate pairs whose boxes
+    overlap (every pair when ``candidates`` is None).
 
-    ``candidates`` restricts the booleans to the given pairs: the precompute passes
-    the pairs that coal found intersecting (section 6's test), since the others have
-    no common volume (up to the meshes' deviation from the exact shapes), and a
-    boolean costs about a millisecond."""
-    mans = [shape_manifold(s, sections) for s in shapes]
-    vols = [m.volume() for m in mans]
-    boxes = [m.bounding_box() for m in mans]
-    n = len(mans)
+    The precompute passes the pairs that coal found intersecting (section 6's test),
+    since the others have no common volume."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    n = len(shapes)
     if candidates is None:
         candidates = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    pairs = {}
-    for i, j in candidates:
-        bi, bj = boxes[i], boxes[j]
-        if (bi[0] > bj[3] or bj[0] > bi[3] or bi[1] > bj[4] or bj[1] > bi[4]
-                or bi[2] > bj[5] or bj[2] > bi[5]):
-            continue
-        pairs[(i, j)] = (mans[i] ^ mans[j]).volume()
-    return vols, pairs
+    pairs = [(i, j) for i, j in candidates if _boxes_overlap(shapes[i], shapes[j])]
+    if method == "fast":
+        vols = [s.volume() for s in shapes]
+        out, rest = fast_volumes(shapes, pairs)
+    else:
+        vols, out, rest = None, {}, pairs
+    need = sorted({k for p in rest for k in p}) if vols is not None else range(n)
+    mans = {k: shape_manifold(shapes[k], sections) for k in need}
+    if vols is None:
+        vols = [mans[k].volume() for k in range(n)]
+    for i, j in rest:
+        out[(i, j)] = (mans[i] ^ mans[j]).volume()
+    return vols, {p: out[p] for p in pairs}
 
 
 def clutteredness(shapes: Sequence[Shape], sections: int = 32,
-                  candidates: Iterable[tuple[int, int]] | None = None) -> float:
+                  candidates: Iterable[tuple[int, int]] | None = None,
+                  method: str = "fast") -> float:
     if len(shapes) < 2:
         return 0.0
-    vols, pairs = overlap_volumes(shapes, sections, candidates)
+    vols, pairs = overlap_volumes(shapes, sections, candidates, method)
     return float(sum(pairs.values()) / sum(vols))

@@ -1,11 +1,14 @@
-"""SPEC section 6's intersection test, through coal.
+"""SPEC section 6's intersection test.
 
-Two spaces *intersect* when coal's signed distance between them is below
--1e-9 m (touching does not count). :class:`SpaceSet` keeps one coal geometry
-and one transform per space and updates them in place when a space's
-parameters change, so Shrinking allocates nothing per iteration; every query
-clears its result first. Pairs whose bounding boxes are disjoint are answered
-without a call to coal.
+Two spaces *intersect* when they overlap by more than 1e-9 m (coal's signed
+distance below -1e-9 m; touching does not count). Two upright cylinders or disks
+(axis along world z) are answered in closed form: they overlap by min(r1 + r2 - d,
+overlap of the z ranges), the exact penetration depth of two coaxial-direction
+cylinders. Every other pair goes to coal. :class:`SpaceSet` keeps one coal
+geometry and transform per space and brings them up to date only when a pair that
+needs coal asks (Shrinking changes many spaces that only meet upright cylinders);
+every query clears its result first. Pairs whose bounding boxes are disjoint are
+answered without a call.
 """
 
 from __future__ import annotations
@@ -17,11 +20,12 @@ import numpy as np
 
 from .errors import InputError
 from .scene import INTERPENETRATION_TOL, Scene
-from .shapes import Shape, aabbs_overlap
+from .shapes import Shape
 
 INTERSECT_TOL = 1e-9
 # Flips a coal cone (apex at +halfLength) onto ours (apex at the origin, axis +z).
 _FLIP_X = np.diag([1.0, -1.0, -1.0])
+_UPRIGHT_TOL = 1e-12
 
 
 def _coal_geometry(shape: Shape):
@@ -44,57 +48,100 @@ def _set_geometry(geom, shape: Shape) -> None:
     geom.computeLocalAABB()
 
 
+def _coal_translation(shape: Shape, axis: np.ndarray) -> np.ndarray:
+    center = np.asarray(shape.center, dtype=np.float64)
+    if shape.kind == "cone":  # coal's cone is centred half-way along its axis
+        return center + axis * (shape.dims[0] / 2)
+    return center
+
+
 def _set_transform(tf: coal.Transform3s, shape: Shape) -> None:
     rot = shape.rotation
-    center = np.asarray(shape.center, dtype=np.float64)
-    if shape.kind == "cone":
-        center = center + rot[:, 2] * (shape.dims[0] / 2)
-        rot = rot @ _FLIP_X
-    tf.setRotation(rot)
-    tf.setTranslation(center)
+    tf.setRotation(rot @ _FLIP_X if shape.kind == "cone" else rot)
+    tf.setTranslation(_coal_translation(shape, rot[:, 2]))
+
+
+def _upright(shape: Shape) -> bool:
+    return shape.kind in ("cylinder", "disk") and abs(shape.rotation[2, 2] - 1.0) <= _UPRIGHT_TOL
+
+
+def upright_overlap(a: Shape, b: Shape) -> float:
+    """Penetration depth of two upright cylinders (negative: apart by at least that)."""
+    d = float(np.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1]))
+    top = min(a.center[2] + a.dims[1] / 2, b.center[2] + b.dims[1] / 2)
+    bottom = max(a.center[2] - a.dims[1] / 2, b.center[2] - b.dims[1] / 2)
+    return min(a.dims[0] + b.dims[0] - d, top - bottom)
 
 
 class SpaceSet:
-    """Coal geometries of a list of shapes, updatable in place."""
+    """The intersection test over a list of shapes, updatable in place."""
 
     def __init__(self, shapes: Sequence[Shape]):
         self.shapes = list(shapes)
-        self.geoms = [_coal_geometry(s) for s in self.shapes]
-        self.tfs = [coal.Transform3s() for _ in self.shapes]
-        for tf, s in zip(self.tfs, self.shapes, strict=True):
-            _set_transform(tf, s)
-        self.boxes = [s.aabb() for s in self.shapes]
-        self._lo = np.array([b[0] for b in self.boxes]).reshape(-1, 3)
-        self._hi = np.array([b[1] for b in self.boxes]).reshape(-1, 3)
+        self.upright = [_upright(s) for s in self.shapes]
+        self.geoms: list = [None] * len(self.shapes)
+        self.tfs: list = [None] * len(self.shapes)
+        self._stale = [True] * len(self.shapes)
+        self._quat: list = [None] * len(self.shapes)
+        self._axis = [s.rotation[:, 2].copy() for s in self.shapes]
+        boxes = [s.aabb() for s in self.shapes]
+        self._lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
+        self._hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
         self._req = coal.DistanceRequest()
         self._req.enable_signed_distance = True
         self._res = coal.DistanceResult()
 
     def update(self, i: int, shape: Shape) -> None:
+        """Space i is now ``shape`` (same kind; Shrinking only ever makes it smaller, so
+        the bounding boxes of :meth:`candidate_pairs` stay valid as upper bounds)."""
         assert shape.kind == self.shapes[i].kind
         self.shapes[i] = shape
-        _set_geometry(self.geoms[i], shape)
-        _set_transform(self.tfs[i], shape)
-        self.boxes[i] = shape.aabb()
-        self._lo[i], self._hi[i] = self.boxes[i]
+        self._stale[i] = True
+
+    def _coal(self, i: int):
+        if self._stale[i]:
+            s = self.shapes[i]
+            if self.geoms[i] is None:
+                self.geoms[i], self.tfs[i] = _coal_geometry(s), coal.Transform3s()
+                _set_transform(self.tfs[i], s)
+                self._quat[i] = s.quat
+            else:
+                _set_geometry(self.geoms[i], s)
+                if s.quat == self._quat[i]:  # Shrinking: the rotation stays
+                    self.tfs[i].setTranslation(_coal_translation(s, self._axis[i]))
+                else:
+                    _set_transform(self.tfs[i], s)
+                    self._quat[i] = s.quat
+            self._stale[i] = False
+        return self.geoms[i], self.tfs[i]
 
     def candidate_pairs(self) -> list[tuple[int, int]]:
-        """Pairs (i < j) whose bounding boxes overlap, in order: one vectorised test
-        instead of n^2 small ones."""
+        """Pairs (i < j) whose bounding boxes (of the shapes given at construction)
+        overlap, in order: one vectorised test instead of n^2 small ones."""
         ok = np.all((self._lo[:, None, :] <= self._hi[None, :, :])
                     & (self._lo[None, :, :] <= self._hi[:, None, :]), axis=-1)
         i, j = np.nonzero(np.triu(ok, 1))
         return list(zip(i.tolist(), j.tolist(), strict=True))
 
     def signed_distance(self, i: int, j: int) -> float:
+        """coal's signed distance (the test's reference, for every pair kind)."""
+        gi, ti = self._coal(i)
+        gj, tj = self._coal(j)
         self._res.clear()
-        return float(coal.distance(self.geoms[i], self.tfs[i], self.geoms[j], self.tfs[j],
-                                   self._req, self._res))
+        return float(coal.distance(gi, ti, gj, tj, self._req, self._res))
+
+    def depth(self, i: int, j: int) -> tuple[float, bool]:
+        """(how far the two spaces overlap, whether that is exact): the closed form for
+        two upright cylinders, else minus coal's signed distance (EPA's estimate)."""
+        if self.upright[i] and self.upright[j]:
+            return upright_overlap(self.shapes[i], self.shapes[j]), True
+        return -self.signed_distance(i, j), False
 
     def intersects(self, i: int, j: int, tol: float = INTERSECT_TOL) -> bool:
-        if not aabbs_overlap(self.boxes[i], self.boxes[j]):
-            return False
-        return self.signed_distance(i, j) < -tol
+        return self.depth(i, j)[0] > tol
+
+    def intersecting_pairs(self) -> list[tuple[int, int]]:
+        return [(i, j) for i, j in self.candidate_pairs() if self.intersects(i, j)]
 
 
 def check_bodies_apart(scene: Scene) -> None:
@@ -102,11 +149,9 @@ def check_bodies_apart(scene: Scene) -> None:
     from .templates import object_body
 
     bodies = SpaceSet([object_body(o) for o in scene.objects])
-    n = len(scene.objects)
-    for i in range(n):
-        for j in range(i + 1, n):
-            if bodies.intersects(i, j, INTERPENETRATION_TOL):
-                d = bodies.signed_distance(i, j)
-                raise InputError(scene.source, f"objects[{scene.objects[j].id}].position",
-                                 f"interpenetrates object {scene.objects[i].id!r} "
-                                 f"(signed distance {d:.4g} m < -1e-6 m)")
+    for i, j in bodies.candidate_pairs():
+        if bodies.intersects(i, j, INTERPENETRATION_TOL):
+            d = bodies.signed_distance(i, j)
+            raise InputError(scene.source, f"objects[{scene.objects[j].id}].position",
+                             f"interpenetrates object {scene.objects[i].id!r} "
+                             f"(signed distance {d:.4g} m < -1e-6 m)")

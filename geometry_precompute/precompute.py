@@ -83,11 +83,12 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
     pairs = intersecting_pairs(coll)
     clusters = clusters_from_pairs(len(spaces), pairs)
     t2 = time.perf_counter()
-    # Booleans only for the pairs coal found intersecting (clutteredness.py says why).
+    # Volumes only for the pairs found intersecting (clutteredness.py says why).
     c_init = clutteredness(shapes_init, sections, pairs)
     t3 = time.perf_counter()
     if c_init > 0.0:
-        res = shrink(spaces, s["shrink_step"], s["shrink_max_iter"], space_set=coll)
+        res = shrink(spaces, s["shrink_step"], s["shrink_max_iter"], space_set=coll,
+                     pairs=pairs)
         q_opt, iterations, still = res.q_opt, res.iterations, res.still_intersecting
         shapes_opt = [sp.shape(q) for sp, q in zip(spaces, q_opt, strict=True)]
     else:  # SPEC section 7: a scene with C_init = 0 is left as it is.

@@ -154,7 +154,7 @@ _DOCS = {
     "gripper.finger_radius": "collision gripper: finger capsule radius, m",
     "gripper.opening": "collision gripper: distance between the finger axes, m",
     "gripper.palm_radius": "collision gripper: palm capsule radius, m",
-    "mesh_sections": "sections of the meshes used for the clutteredness booleans",
+    "mesh_sections": "mesh sections of the clutteredness booleans (pairs with no fast path)",
     "entropy_variant": "entropic clutteredness h: formula (paper) or reference_code",
     "bootstrap_resamples": "resamples of the bootstrap confidence intervals",
     "optimize_starts": "optimized mode: start poses the search scores candidates on",

@@ -139,7 +139,9 @@ def test_clutteredness_invariant_under_rigid_motion(angle, tx, ty, tz):
         c = rot.apply(s.center) + np.array([tx, ty, tz])
         q = quat_from_matrix((rot * Rotation.from_matrix(s.rotation)).as_matrix())
         moved.append(Shape(s.kind, tuple(c), tuple(q), s.dims))
-    assert clutteredness(moved) == pytest.approx(clutteredness(shapes), rel=1e-6, abs=1e-9)
+    # A tilt takes the cylinders off the fast paths, so both sides use the booleans.
+    assert clutteredness(moved, method="boolean") == pytest.approx(
+        clutteredness(shapes, method="boolean"), rel=1e-6, abs=1e-9)
 
 
 def test_aabb_contains_mesh():
