@@ -32,17 +32,19 @@ def _boxes_overlap(a: Shape, b: Shape) -> bool:
 def overlap_volumes(shapes: Sequence[Shape], sections: int,
                     candidates: Iterable[tuple[int, int]] | None = None,
                     method: str = "fast") -> tuple[list, dict]:
-    """(volumes, {(i, j): intersection volume}) for the candidate pairs whose boxes
-    overlap (every pair when ``candidates`` is None).
+    """(volumes, {(i, j): intersection volume}) for the pairs whose boxes overlap, or
+    for the ``candidates`` given.
 
-    The precompute passes the pairs that coal found intersecting (section 6's test),
-    since the others have no common volume."""
+    The precompute passes the pairs that section 6's test found intersecting, since
+    the others have no common volume."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     n = len(shapes)
     if candidates is None:
         candidates = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    pairs = [(i, j) for i, j in candidates if _boxes_overlap(shapes[i], shapes[j])]
+        pairs = [(i, j) for i, j in candidates if _boxes_overlap(shapes[i], shapes[j])]
+    else:  # pairs found intersecting: their boxes overlap
+        pairs = list(candidates)
     if method == "fast":
         vols = [s.volume() for s in shapes]
         out, rest = fast_volumes(shapes, pairs)

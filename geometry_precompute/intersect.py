@@ -13,6 +13,7 @@ answered without a call.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import coal
@@ -48,17 +49,18 @@ def _set_geometry(geom, shape: Shape) -> None:
     geom.computeLocalAABB()
 
 
-def _coal_translation(shape: Shape, axis: np.ndarray) -> np.ndarray:
-    center = np.asarray(shape.center, dtype=np.float64)
+def _coal_translation(shape: Shape, axis: tuple[float, float, float]) -> np.ndarray:
+    x, y, z = shape.center
     if shape.kind == "cone":  # coal's cone is centred half-way along its axis
-        return center + axis * (shape.dims[0] / 2)
-    return center
+        h = shape.dims[0] / 2
+        return np.array((x + axis[0] * h, y + axis[1] * h, z + axis[2] * h))
+    return np.array((x, y, z), dtype=np.float64)
 
 
 def _set_transform(tf: coal.Transform3s, shape: Shape) -> None:
     rot = shape.rotation
     tf.setRotation(rot @ _FLIP_X if shape.kind == "cone" else rot)
-    tf.setTranslation(_coal_translation(shape, rot[:, 2]))
+    tf.setTranslation(_coal_translation(shape, tuple(rot[:, 2].tolist())))
 
 
 def _upright(shape: Shape) -> bool:
@@ -67,7 +69,7 @@ def _upright(shape: Shape) -> bool:
 
 def upright_overlap(a: Shape, b: Shape) -> float:
     """Penetration depth of two upright cylinders (negative: apart by at least that)."""
-    d = float(np.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1]))
+    d = math.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1])
     top = min(a.center[2] + a.dims[1] / 2, b.center[2] + b.dims[1] / 2)
     bottom = max(a.center[2] - a.dims[1] / 2, b.center[2] - b.dims[1] / 2)
     return min(a.dims[0] + b.dims[0] - d, top - bottom)
@@ -83,7 +85,7 @@ class SpaceSet:
         self.tfs: list = [None] * len(self.shapes)
         self._stale = [True] * len(self.shapes)
         self._quat: list = [None] * len(self.shapes)
-        self._axis = [s.rotation[:, 2].copy() for s in self.shapes]
+        self._axis = [tuple(s.rotation[:, 2].tolist()) for s in self.shapes]
         boxes = [s.aabb() for s in self.shapes]
         self._lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
         self._hi = np.array([b[1] for b in boxes]).reshape(-1, 3)

@@ -1,8 +1,8 @@
 """Intersection volumes of position spaces without a mesh boolean (SPEC section 5's
 fast paths).
 
-Two pair types, computed for all pairs of a scene at once, cover 87 % of the
-intersecting pairs of the random generator's scenes:
+Three pair types, computed for all pairs of a scene at once, cover every
+intersecting pair of the random generator's scenes:
 
 - two *upright* cylinders or disks (axis along world z): exact, the lens area of
   their circles times the overlap of their z ranges;
@@ -10,19 +10,17 @@ intersecting pairs of the random generator's scenes:
   disk: the cut of both by a plane perpendicular to the cone's axis is a disk and a
   rectangle, whose common area has a closed form (:func:`disk_rect_area`); that area
   is integrated along the axis by Gauss-Legendre between every point where it is not
-  smooth (the rectangle's edges and corners meeting the circle, the chord appearing),
-  so each piece is a nearly smooth function and eight nodes give it to about 1e-6
-  (containment cases to 1e-7; tests/test_overlap.py).
+  smooth (the rectangle's edges and corners meeting the circle, the chord appearing);
+- two level cones with their apexes at one height (cups of one height on one table):
+  the overlap of their vertical chords, integrated across and along the first cone's
+  axis between the points where it is not smooth (:func:`cone_cone_volumes`).
 
-Two level cones are left to the boolean: a two-dimensional quadrature of their
-chords was tried and dropped, because the lines where the two chords' ends cross
-bend with the slice and left errors of up to 5 % of the pair's volume at a cost
-above the boolean's (docs/DECISIONS.md).
-
-Nodes are mapped by t = (1 - cos theta) / 2, which makes the square-root behaviour at
-the ends of each piece (a chord that opens like sqrt) smooth in theta. Every other
-pair (boxes, tilted shapes) is left to the mesh boolean, which is also the reference
-these are tested against (tests/test_overlap.py).
+Each piece is then a nearly smooth function, and eight nodes give the volume to
+about 1e-6 of itself (containment cases to 1e-7; tests/test_precompute_fast.py). Nodes
+are mapped by t = (1 - cos theta) / 2, which makes the square-root behaviour at the
+ends of each piece (a chord that opens like sqrt) smooth in theta. Every other pair
+(boxes, tilted shapes, cones at two heights) is left to the mesh boolean, which is
+also the reference these are tested against.
 """
 
 from __future__ import annotations
@@ -38,6 +36,8 @@ from .shapes import Shape
 AXIS_TOL = 1e-12
 # Gauss nodes per smooth piece of the cone x cylinder integral.
 NODES_CYL = 8
+# Gauss nodes per smooth piece, along and across the axis, of the cone x cone integral.
+NODES_CONE = 8
 
 
 @cache
@@ -50,15 +50,18 @@ def _nodes(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _pieces(lo: np.ndarray, hi: np.ndarray, breaks: np.ndarray, n: int):
-    """Nodes and weights over [lo, hi] (leading axes ...), split at ``breaks`` (..., K;
-    NaN for none). Returns (x, w) of shape (..., K + 1, n)."""
+    """Nodes over [lo, hi] (P,) split at ``breaks`` (P, K; NaN for none), for the
+    pieces of non-zero width only: (x, w) of shape (M, n) and the pair of each piece
+    (M,)."""
     hi = np.maximum(hi, lo)
-    b = np.clip(np.where(np.isnan(breaks), lo[..., None], breaks), lo[..., None],
-                hi[..., None])
-    edges = np.concatenate([lo[..., None], np.sort(b, axis=-1), hi[..., None]], axis=-1)
-    a, width = edges[..., :-1, None], np.diff(edges, axis=-1)[..., None]
+    b = np.clip(np.where(np.isnan(breaks), lo[:, None], breaks), lo[:, None], hi[:, None])
+    edges = np.concatenate([lo[:, None], np.sort(b, axis=1), hi[:, None]], axis=1)
+    width = np.diff(edges, axis=1)
+    keep = width > 0.0
+    owner = np.nonzero(keep)[0]
+    a, width = edges[:, :-1][keep][:, None], width[keep][:, None]
     s, w = _nodes(n)
-    return a + width * s, width * w
+    return a + width * s, width * w, owner
 
 
 def lens_area(r1, r2, d):
@@ -97,8 +100,9 @@ def disk_rect_area(r, x0, x1, y0, y1):
     x0, x1 = np.clip(x0, -r, r), np.clip(x1, -r, r)
     x1 = np.maximum(x1, x0)
     y1 = np.maximum(y1, y0)
-    return (_strip(x1, y1, r) - _strip(x0, y1, r) - _strip(x1, y0, r)
-            + _strip(x0, y0, r))
+    corners = _strip(np.stack(np.broadcast_arrays(x1, x0, x1, x0)),
+                     np.stack(np.broadcast_arrays(y1, y1, y0, y0)), r)
+    return corners[0] - corners[1] - corners[2] + corners[3]
 
 
 def _real_roots_quartic(coef: np.ndarray) -> np.ndarray:
@@ -123,9 +127,13 @@ def _real_roots_quartic(coef: np.ndarray) -> np.ndarray:
 
 
 def _real_roots_quadratic(a, b, c):
-    disc = b * b - 4 * a * c
-    sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
-    return np.stack([(-b - sq) / (2 * a), (-b + sq) / (2 * a)], axis=-1)
+    """Real roots of a x^2 + b x + c (the stable form q = -(b + sign(b) sqrt(disc)) / 2,
+    roots q / a and c / q, so a vanishing a leaves the linear root); NaN for none."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = b * b - 4 * a * c
+        q = -0.5 * (b + np.where(b < 0, -1.0, 1.0) * np.sqrt(np.where(disc >= 0, disc, np.nan)))
+        roots = np.stack([q / a, c / q], axis=-1)
+    return np.where(np.isfinite(roots), roots, np.nan)
 
 
 def cone_cylinder_volumes(apex, axis, length, tan_a, center, radius, height):
@@ -143,18 +151,108 @@ def cone_cylinder_volumes(apex, axis, length, tan_a, center, radius, height):
     c0 = tc * tc + uc * uc - r * r
     for sign in (1.0, -1.0):  # a rectangle edge tangent to the slice's circle
         breaks += list(_real_roots_quadratic(1 + T * T, -2 * (tc + sign * uc * T), c0).T)
-    for dz in (dlo, dhi):  # a rectangle corner on the circle
-        A, B, C = 1 + T * T, -2 * tc, tc * tc - uc * uc - r * r - dz * dz
-        q4 = 4 * uc * uc
-        coef = np.stack([A * A, 2 * A * B, B * B + 2 * A * C + q4, 2 * B * C - 2 * q4 * tc,
-                         C * C - q4 * (r * r - tc * tc)], axis=1)
-        breaks += list(_real_roots_quartic(coef).T)
-    t, w = _pieces(lo, hi, np.stack(breaks, axis=1), NODES_CYL)
-    rho = t * T[:, None, None]
-    half = np.sqrt(np.maximum(r[:, None, None] ** 2 - (t - tc[:, None, None]) ** 2, 0.0))
-    ucn = uc[:, None, None]
-    area = disk_rect_area(rho, ucn - half, ucn + half, dlo[:, None, None], dhi[:, None, None])
-    return np.sum(w * area, axis=(1, 2))
+    # A rectangle corner on the circle: one quartic per horizontal edge, solved together.
+    dz = np.concatenate([dlo, dhi])
+    tc2, uc2, r2, T2 = (np.concatenate([x, x]) for x in (tc, uc, r, T))
+    A, B, C = 1 + T2 * T2, -2 * tc2, tc2 * tc2 - uc2 * uc2 - r2 * r2 - dz * dz
+    q4 = 4 * uc2 * uc2
+    coef = np.stack([A * A, 2 * A * B, B * B + 2 * A * C + q4, 2 * B * C - 2 * q4 * tc2,
+                     C * C - q4 * (r2 * r2 - tc2 * tc2)], axis=1)
+    corners = _real_roots_quartic(coef)
+    P = len(tc)
+    breaks = np.concatenate([np.stack(breaks, axis=1), corners[:P], corners[P:]], axis=1)
+    t, w, k = _pieces(lo, hi, breaks, NODES_CYL)
+    half = np.sqrt(np.maximum((r[k] ** 2)[:, None] - (t - tc[k][:, None]) ** 2, 0.0))
+    ucn = uc[k][:, None]
+    area = disk_rect_area(t * T[k][:, None], ucn - half, ucn + half, dlo[k][:, None],
+                          dhi[k][:, None])
+    return np.bincount(k, weights=np.sum(w * area, axis=1), minlength=P)
+
+
+def _lin(num, den):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = num / den
+    return np.where(np.isfinite(out), out, np.nan)
+
+def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
+    """Volumes common to pairs of level cones whose apexes are at one height (arrays as
+    in :func:`cone_cylinder_volumes`).
+
+    In cone 1's frame (t along its axis, u across it), cone 2's axial and lateral
+    coordinates s2, w2 are affine in (t, u); the vertical chords are 2 h1 =
+    2 sqrt(T1^2 t^2 - u^2) and 2 h2 = 2 sqrt(T2^2 s2^2 - w2^2) (for 0 <= s2 <= L2), both
+    centred on the apexes' height, so their overlap is 2 min(h1, h2). Across u, that is
+    smooth between the roots of linear and quadratic equations (chords ending, cone 2's
+    base and apex, h1 = h2); along t, the slice integral is smooth between the values
+    of t where those roots meet, each again the root of a linear or quadratic
+    equation. Gauss-Legendre (cosine-mapped) between all of them."""
+    e1, e2 = axis1, axis2
+    v1 = np.stack([-e1[:, 1], e1[:, 0]], axis=1)
+    v2 = np.stack([-e2[:, 1], e2[:, 0]], axis=1)
+    d = apex1[:, :2] - apex2[:, :2]
+    s0, st, su = np.sum(d * e2, 1), np.sum(e1 * e2, 1), np.sum(v1 * e2, 1)
+    w0, wt, wu = np.sum(d * v2, 1), np.sum(e1 * v2, 1), np.sum(v1 * v2, 1)
+    T1, T2, L1, L2 = tan1, tan2, length1, length2
+    # The t range: cone 2's extent along e1.
+    p0 = -np.sum(d * e1, 1)
+    sin_ = np.sum(v2 * e1, 1)
+    reach = L2 * T2 * np.abs(sin_)
+    lo = np.maximum(0.0, p0 + np.minimum(0.0, L2 * st - reach))
+    hi = np.minimum(L1, p0 + np.maximum(0.0, L2 * st + reach))
+    ev = []
+    for sg in (1.0, -1.0):           # u = sg * T1 * t
+        a_s, a_w = st + su * sg * T1, wt + wu * sg * T1
+        for pm in (1.0, -1.0):       # T2 s2 = pm w2 on the cone-1 edge
+            ev.append(_lin(pm * w0 - T2 * s0, T2 * a_s - pm * a_w))
+        for c in (0.0, L2):          # s2 = c on the cone-1 edge
+            ev.append(_lin(c - s0, a_s))
+    for c in (0.0, L2):              # s2 = c meets T2 s2 = pm w2
+        for pm in (1.0, -1.0):
+            # su u = c - s0 - st t ; wu u = pm T2 c - w0 - wt t
+            ev.append(_lin(su * (pm * T2 * c - w0) - wu * (c - s0), su * wt - wu * st))
+    # min switch: (A + 1) u^2 + B u + (C - T1^2 t^2) = 0, B = b0 + b1 t, C = c0 + c1 t + c2 t^2
+    A = (T2 * su) ** 2 - wu ** 2
+    b0, b1 = 2 * (T2 * T2 * su * s0 - wu * w0), 2 * (T2 * T2 * su * st - wu * wt)
+    c0 = (T2 * s0) ** 2 - w0 ** 2
+    c1 = 2 * (T2 * T2 * s0 * st - w0 * wt)
+    c2 = (T2 * st) ** 2 - wt ** 2 - T1 * T1
+    # its double roots: B^2 - 4 (A + 1) C' = 0
+    a4 = 4 * (A + 1)
+    qa, qb, qc = b1 * b1 - a4 * c2, 2 * b0 * b1 - a4 * c1, b0 * b0 - a4 * c0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ev += list(_real_roots_quadratic(qa, qb, qc).T)
+        # it meets s2 = L2: u = (L2 - s0 - st t) / su = m0 + m1 t
+        m0, m1 = (L2 - s0) / su, -st / su
+        # (A+1) u^2 + (b0 + b1 t) u + c0 + c1 t + c2 t^2 = 0
+        ea = (A + 1) * m1 * m1 + b1 * m1 + c2
+        eb = 2 * (A + 1) * m0 * m1 + b0 * m1 + b1 * m0 + c1
+        ec = (A + 1) * m0 * m0 + b0 * m0 + c0
+        ev += list(_real_roots_quadratic(ea, eb, ec).T)
+    ev = np.where(np.isfinite(np.stack(ev, 1)), np.stack(ev, 1), np.nan)
+    t, wt_, k = _pieces(lo, hi, ev, NODES_CONE)          # (Mt, NT)
+    t, wt_ = t.ravel(), wt_.ravel()
+    k = np.repeat(k, NODES_CONE)
+    rho = T1[k] * t
+    S, W = s0[k] + st[k] * t, w0[k] + wt[k] * t
+    Su, Wu, T2k, L2k = su[k], wu[k], T2[k], L2[k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ub = [_lin(-S, Su), _lin(L2k - S, Su), _lin(W - T2k * S, T2k * Su - Wu),
+              _lin(-W - T2k * S, T2k * Su + Wu)]
+        Bk = b0[k] + b1[k] * t
+        Ck = c0[k] + c1[k] * t + (c2[k] + T1[k] ** 2) * t * t - rho * rho
+        ub += list(_real_roots_quadratic(A[k] + 1, Bk, Ck).T)
+    ub = np.stack(ub, 1)
+    ub = np.where(np.isfinite(ub), ub, np.nan)
+    u, wu_, j = _pieces(-rho, rho, ub, NODES_CONE)      # (Mu, NU), owner t node
+    tj = t[j][:, None]
+    kj = k[j]
+    h1 = np.sqrt(np.maximum((T1[kj][:, None] * tj) ** 2 - u * u, 0.0))
+    s2 = s0[kj][:, None] + st[kj][:, None] * tj + su[kj][:, None] * u
+    w2 = w0[kj][:, None] + wt[kj][:, None] * tj + wu[kj][:, None] * u
+    h2 = np.sqrt(np.maximum((T2[kj][:, None] * s2) ** 2 - w2 * w2, 0.0))
+    h2 = np.where((s2 >= 0) & (s2 <= L2[kj][:, None]), h2, 0.0)
+    inner = np.bincount(j, weights=np.sum(wu_ * 2 * np.minimum(h1, h2), 1), minlength=len(t))
+    return np.bincount(k, weights=wt_ * inner, minlength=len(lo))
 
 
 def _upright(s: Shape) -> bool:
@@ -166,10 +264,17 @@ def _level(s: Shape) -> bool:
 
 
 def pair_kind(a: Shape, b: Shape) -> str | None:
-    """'cyl_cyl', 'cone_cyl', 'cyl_cone', or None (the pair needs a boolean)."""
+    """'cyl_cyl', 'cone_cyl', 'cyl_cone', 'cone_cone', or None (the pair needs a
+    boolean)."""
     if _upright(a):
         return "cyl_cyl" if _upright(b) else "cyl_cone" if _level(b) else None
-    return "cone_cyl" if _level(a) and _upright(b) else None
+    if not _level(a):
+        return None
+    if _upright(b):
+        return "cone_cyl"
+    if _level(b) and abs(a.center[2] - b.center[2]) <= AXIS_TOL:
+        return "cone_cone"
+    return None
 
 
 def _cone_arrays(shapes: Sequence[Shape]):
@@ -210,8 +315,10 @@ def fast_volumes(shapes: Sequence[Shape], pairs: Sequence[tuple[int, int]]
             dz = (np.minimum(ca[:, 2] + ha / 2, cb[:, 2] + hb / 2)
                   - np.maximum(ca[:, 2] - ha / 2, cb[:, 2] - hb / 2))
             vol = lens_area(ra, rb, dist) * np.maximum(dz, 0.0)
-        else:
+        elif k == "cone_cyl":
             vol = cone_cylinder_volumes(*_cone_arrays(a), *_cyl_arrays(b))
+        else:
+            vol = cone_cone_volumes(*_cone_arrays(a), *_cone_arrays(b))
         for r, x in zip(rows, vol.tolist(), strict=True):
             out[(r[2], r[3])] = x
     return out, rest

@@ -54,30 +54,36 @@ def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 100
     updated in place when given, ``pairs`` (its intersecting pairs) likewise;
     ``history``, when given, receives a copy of every task's parameters after each
     pass."""
-    q = [s.q_init.copy() for s in spaces]
+    # Parameters as tuples of floats: the same IEEE arithmetic as NumPy's, without its
+    # per-call cost in a loop of a few hundred steps.
+    q = [tuple(float(v) for v in s.q_init) for s in spaces]
+    q_min = [tuple(float(v) for v in s.q_min) for s in spaces]
+    step = [tuple(float(v) for v in sigma * (s.q_init - s.q_min)) for s in spaces]
+    slack = [tuple(float(v) for v in 1e-9 * (s.q_init - s.q_min)) for s in spaces]
+    can_shrink = [any(v - m > e for v, m, e in zip(q[i], q_min[i], slack[i], strict=True))
+                  for i in range(len(spaces))]
     coll = space_set if space_set is not None else SpaceSet([s.shape() for s in spaces])
     active = list(pairs) if pairs is not None else coll.intersecting_pairs()
-    q_min = [s.q_min for s in spaces]
-    step = [sigma * (s.q_init - s.q_min) for s in spaces]
-    slack = [1e-9 * (s.q_init - s.q_min) for s in spaces]
     iterations = 0
     shapes = list(coll.shapes)
     sure = {p: 0.0 for p in active}  # overlap known to remain, by each pair's last test
     for _ in range(max_iter):
-        overlapping = sorted({i for p in active for i in p})
-        shrinkable = [i for i in overlapping if (q[i] - q_min[i] > slack[i]).any()]
+        shrinkable = sorted({i for p in active for i in p if can_shrink[i]})
         if not shrinkable:
             break
         move = {}
         for i in shrinkable:
-            q[i] = np.maximum(q_min[i], q[i] - step[i])
-            new = spaces[i].shape(q[i])
+            q[i] = qi = tuple(max(m, v - d) for v, m, d in zip(q[i], q_min[i], step[i],
+                                                               strict=True))
+            can_shrink[i] = any(v - m > e for v, m, e in zip(qi, q_min[i], slack[i],
+                                                             strict=True))
+            new = spaces[i].shape_of(qi)
             move[i] = step_bound(shapes[i], new)
             shapes[i] = new
             coll.update(i, new)
         iterations += 1
         if history is not None:
-            history.append([x.copy() for x in q])
+            history.append([np.array(x) for x in q])
         kept = []
         for i, j in active:
             if i in move or j in move:
@@ -89,4 +95,4 @@ def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 100
                     sure[(i, j)] = d if exact else d - COAL_DEPTH_MARGIN
             kept.append((i, j))
         active = kept
-    return ShrinkResult(q, iterations, active)
+    return ShrinkResult([np.array(x) for x in q], iterations, active)

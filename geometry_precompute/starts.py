@@ -17,6 +17,8 @@ they never coincide with the grid that the reported success is measured on.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -29,13 +31,21 @@ def _axis(lo: float, hi: float, n: int) -> np.ndarray:
     return np.array([(lo + hi) / 2.0]) if n == 1 else np.linspace(lo, hi, n)
 
 
+@lru_cache(maxsize=64)
+def _orientations(n: int, orientation: str, seed: int) -> np.ndarray:
+    """The start orientations depend on the grid size and seed only: drawn once per
+    process (read-only), as scipy's Rotation.random costs about 0.1 ms a call."""
+    if orientation == "forward":
+        q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+    else:
+        q = quat_from_matrix(Rotation.random(n, rng=np.random.default_rng(seed)).as_matrix())
+    q.flags.writeable = False
+    return q
+
+
 def start_orientations(settings: Settings) -> np.ndarray:
     ny, nz = settings["start_grid"]
-    n = ny * nz
-    if settings["start_orientation"] == "forward":
-        return np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
-    rot = Rotation.random(n, rng=np.random.default_rng(settings["seed"]))
-    return quat_from_matrix(rot.as_matrix())
+    return _orientations(ny * nz, settings["start_orientation"], settings["seed"])
 
 
 def _plane(scene: Scene, settings: Settings) -> tuple[float, tuple, tuple]:
@@ -56,14 +66,26 @@ def start_poses(scene: Scene, settings: Settings) -> np.ndarray:
     return np.concatenate([points, start_orientations(settings)], axis=1)
 
 
-def optimize_start_poses(scene: Scene, settings: Settings) -> np.ndarray:
-    """(optimize_starts, 7): the optimized mode's search starts (module docstring)."""
-    x, (y0, y1), (z0, z1) = _plane(scene, settings)
-    n = settings["optimize_starts"]
-    rng = np.random.default_rng(settings["optimize_seed"])
-    points = np.stack([np.full(n, x), rng.uniform(y0, y1, n), rng.uniform(z0, z1, n)], axis=1)
-    if settings["start_orientation"] == "forward":
-        quats = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+@lru_cache(maxsize=64)
+def _search_draws(n: int, orientation: str, seed: int) -> tuple[np.ndarray, ...]:
+    """The search starts' random numbers (unit y and z fractions, orientations), in the
+    order one generator draws them; read-only and drawn once per process."""
+    rng = np.random.default_rng(seed)
+    uy, uz = rng.random(n), rng.random(n)
+    if orientation == "forward":
+        q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
     else:
-        quats = quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())
+        q = quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())
+    for a in (uy, uz, q):
+        a.flags.writeable = False
+    return uy, uz, q
+
+
+def optimize_start_poses(scene: Scene, settings: Settings) -> np.ndarray:
+    """(optimize_starts, 7): the optimized mode's search starts (module docstring).
+    Positions are lo + (hi - lo) u, as numpy's ``uniform`` computes them."""
+    x, (y0, y1), (z0, z1) = _plane(scene, settings)
+    uy, uz, quats = _search_draws(settings["optimize_starts"], settings["start_orientation"],
+                                  settings["optimize_seed"])
+    points = np.stack([np.full(len(uy), x), y0 + (y1 - y0) * uy, z0 + (z1 - z0) * uz], axis=1)
     return np.concatenate([points, quats], axis=1)

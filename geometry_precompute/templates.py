@@ -10,11 +10,12 @@ vector, so Shrinking never needs to know which template it works on.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from .errors import InputError
-from .frames import frame_from_approach, quat_from_matrix, yaw_matrix
+from .frames import frame_from_approach, quat_of_rotation, yaw_matrix
 from .scene import TEMPLATE_PARAMS, Scene, SceneObject, Task
 from .settings import Settings
 from .shapes import Shape
@@ -47,11 +48,37 @@ class TaskSpace:
 
     def shape(self, q: np.ndarray | None = None) -> Shape:
         q = self.q_init if q is None else np.asarray(q, dtype=np.float64)
-        return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat)
+        return self.shape_of(tuple(float(v) for v in q))
+
+    def shape_of(self, q: tuple[float, ...]) -> Shape:
+        """:meth:`shape` for a tuple of floats (Shrinking's inner loop)."""
+        center = self._fixed_center
+        if center is None:
+            return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat)
+        return Shape(_KIND[self.template], center, self.pose_quat, _dims(self, q))
+
+    @cached_property
+    def _fixed_center(self) -> tuple[float, float, float] | None:
+        """The shape's centre where the parameters do not move it (all but the drawer)."""
+        if self.template == "drawer_pull":
+            return None
+        return _build_shape(self.template, self.obj, self.q_init, self.fixed,
+                            self.pose_quat).center
+
+
+_KIND = {"side_grasp": "cylinder", "handle_grasp": "cone", "top_grasp": "disk"}
+
+
+def _dims(space: TaskSpace, q: tuple[float, ...]) -> tuple[float, float, float]:
+    if space.template == "side_grasp":
+        return (q[0], space.fixed["height"], 0.0)
+    if space.template == "handle_grasp":
+        return (q[0], q[1], 0.0)
+    return (q[0], space.fixed["thickness"], 0.0)
 
 
 def _quat(m: np.ndarray) -> tuple[float, float, float, float]:
-    return tuple(float(v) for v in quat_from_matrix(m))
+    return quat_of_rotation(m)
 
 
 def object_body(obj: SceneObject) -> Shape:

@@ -20,7 +20,12 @@ from scipy.spatial.transform import Rotation
 from geometry_precompute import precompute
 from geometry_precompute.clusters import clusters_from_pairs
 from geometry_precompute.clutteredness import clutteredness, overlap_volumes
-from geometry_precompute.frames import _from_matrix, frame_from_approach, quat_from_matrix
+from geometry_precompute.frames import (
+    _from_matrix,
+    frame_from_approach,
+    quat_from_matrix,
+    quat_of_rotation,
+)
 from geometry_precompute.meshes import shape_manifold
 from geometry_precompute.overlap import disk_rect_area, fast_volumes, lens_area, pair_kind
 from geometry_precompute.shapes import Shape
@@ -100,8 +105,38 @@ def test_cone_cylinder_against_monte_carlo():
     assert abs(vol - box * p) <= 4 * se
 
 
+@given(st.floats(-0.25, 0.25), st.floats(-0.25, 0.25), st.floats(-math.pi, math.pi),
+       st.floats(-math.pi, math.pi), st.floats(0.08, 0.25), st.floats(0.08, 0.25),
+       st.floats(0.15, 0.6), st.floats(0.15, 0.6))
+def test_cone_cone_against_fine_booleans(x, y, yaw1, yaw2, len1, len2, alpha1, alpha2):
+    a = level_cone((0.0, 0.0, 0.05), yaw1, len1, alpha1)
+    b = level_cone((x, y, 0.05), yaw2, len2, alpha2)
+    assert pair_kind(a, b) == "cone_cone"
+    vol, _ = fast_volumes([a, b], [(0, 1)])
+    assert vol[(0, 1)] == pytest.approx(boolean(a, b, 1024), rel=2e-5, abs=1e-10)
+
+
+@pytest.mark.parametrize("apex, yaw", [
+    ((0.0, 0.0), 0.3),                  # identical
+    ((0.05, 0.01), 0.0),                # parallel, apex inside: the second cone, cut
+    ((0.2, 0.01), math.pi),             # facing each other
+    ((0.1, -0.1), math.pi / 2),         # crossing at right angles
+    ((0.2, 0.2), 0.0),                  # apart
+])
+def test_cone_cone_special_positions(apex, yaw):
+    a = level_cone((0.0, 0.0, 0.05), 0.0 if yaw != 0.3 else 0.3)
+    b = level_cone((*apex, 0.05), yaw)
+    exact = {0.3: a.volume()}.get(yaw)
+    if apex == (0.05, 0.01):  # b inside a up to a's base plane, 0.05 short of b's
+        exact = math.pi / 3 * (0.15 * math.tan(0.4)) ** 2 * 0.15
+    ref = exact if exact is not None else boolean(a, b, 1024)
+    for first, second in ((a, b), (b, a)):
+        vol = fast_volumes([first, second], [(0, 1)])[0][(0, 1)]
+        assert vol == pytest.approx(ref, rel=2e-5, abs=1e-12)
+
+
 def test_other_pairs_go_to_the_boolean():
-    cone_a, cone_b = level_cone((0, 0, 0.05), 0.0), level_cone((0.05, 0.02, 0.05), 0.5)
+    cone_a, cone_b = level_cone((0, 0, 0.05), 0.0), level_cone((0.05, 0.02, 0.06), 0.5)
     box = Shape("box", (0.05, 0.0, 0.05), IDENT, (0.05, 0.05, 0.05))
     tilted = Shape("cylinder", (0.0, 0.0, 0.05),
                    tuple(quat_from_matrix(Rotation.from_rotvec([0.3, 0, 0]).as_matrix())),
@@ -148,6 +183,10 @@ def test_frames_bit_identical_to_numpy_and_scipy():
     mats = np.concatenate([np.stack([frame_from_approach(a) for a in dirs[::50]]),
                            Rotation.random(2000, rng=1).as_matrix()])
     assert np.array_equal(_from_matrix(mats).as_quat(), Rotation.from_matrix(mats).as_quat())
+    mats = np.concatenate([mats, Rotation.random(20_000, rng=2).as_matrix(),
+                           [np.eye(3), frame_from_approach((0.0, 0.0, -1.0))]])
+    for m in mats:
+        assert quat_of_rotation(m) == tuple(quat_from_matrix(m))
 
 
 @given(st.integers(1, 14), st.lists(st.tuples(st.integers(0, 13), st.integers(0, 13)),
@@ -240,3 +279,29 @@ def test_precompute_answers_unchanged(recorded):
             err32[k].append(abs(d[f"C_{k}_32"] - d[f"C_{k}_128"]))
     for k in err:
         assert max(err[k]) < max(err32[k]) and np.mean(err[k]) < np.mean(err32[k]) / 5, k
+
+
+def test_cached_start_draws_equal_the_generator():
+    """The start orientations and search starts, drawn once per process, equal drawing
+    them from a new generator each time (numpy's uniform is lo + (hi - lo) u)."""
+    from geometry_precompute import DEFAULTS, random_scene
+    from geometry_precompute.starts import _plane, optimize_start_poses, start_orientations
+
+    for i in range(30):
+        sc = random_scene(i, "uniform", 2, 12)
+        s = DEFAULTS.with_overrides({"optimize_seed": i % 4, "seed": i % 3,
+                                     "optimize_starts": 1 + i, "start_grid": [2 + i % 3, 3],
+                                     "start_orientation": "forward" if i % 5 == 0 else "random"})
+        n = s["optimize_starts"]
+        rng = np.random.default_rng(s["optimize_seed"])
+        x, (y0, y1), (z0, z1) = _plane(sc, s)
+        pts = np.stack([np.full(n, x), rng.uniform(y0, y1, n), rng.uniform(z0, z1, n)], 1)
+        if s["start_orientation"] == "forward":
+            q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+            q0 = np.tile(q[0], (s["start_grid"][0] * 3, 1))
+        else:
+            q = quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())
+            q0 = quat_from_matrix(Rotation.random(
+                s["start_grid"][0] * 3, rng=np.random.default_rng(s["seed"])).as_matrix())
+        assert np.array_equal(optimize_start_poses(sc, s), np.concatenate([pts, q], 1))
+        assert np.array_equal(start_orientations(s), q0)
