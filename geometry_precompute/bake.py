@@ -158,28 +158,31 @@ def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:
     """(d centre / d q, d dims / d q), each (3, P), of a template's space, read off the
     shapes at the bounds; checked at the midpoint, so a template whose space is not
     affine in its parameters cannot be baked silently wrong."""
-    base = space.shape()
-    dc, dd = np.zeros((3, MAX_PARAMS)), np.zeros((3, MAX_PARAMS))
-    for k in range(len(space.param_names)):
-        step = space.q_min[k] - space.q_init[k]
+    # In floats (the same IEEE operations as NumPy's, without its per-call cost).
+    q0 = tuple(float(v) for v in space.q_init)
+    qm = tuple(float(v) for v in space.q_min)
+    base = space.shape_of(q0)
+    dc = [[0.0] * MAX_PARAMS for _ in range(3)]
+    dd = [[0.0] * MAX_PARAMS for _ in range(3)]
+    for k in range(len(q0)):
+        step = qm[k] - q0[k]
         if step == 0.0:  # a fixed parameter: the search cannot move it
             continue
-        q = space.q_init.copy()
-        q[k] = space.q_min[k]
-        moved = space.shape(q)
-        dc[:, k] = (np.subtract(moved.center, base.center)) / step
-        dd[:, k] = (np.subtract(moved.dims, base.dims)) / step
-    mid = (space.q_min + space.q_init) / 2.0
-    shape = space.shape(mid)
-    dq = np.zeros(MAX_PARAMS)
-    dq[:len(mid)] = mid - space.q_init
-    err = np.max(np.abs(np.concatenate([np.subtract(shape.center, np.add(base.center, dc @ dq)),
-                                        np.subtract(shape.dims, np.add(base.dims, dd @ dq))])))
-    if not err <= 1e-9:  # also when NaN
+        moved = space.shape_of((*q0[:k], qm[k], *q0[k + 1:]))
+        for a in range(3):
+            dc[a][k] = (moved.center[a] - base.center[a]) / step
+            dd[a][k] = (moved.dims[a] - base.dims[a]) / step
+    mid = tuple((lo + hi) / 2.0 for lo, hi in zip(qm, q0, strict=True))
+    shape = space.shape_of(mid)
+    dq = [m - i for m, i in zip(mid, q0, strict=True)]
+    errs = [abs(got[a] - (ref[a] + sum(d[a][k] * dq[k] for k in range(len(dq)))))
+            for got, ref, d in ((shape.center, base.center, dc), (shape.dims, base.dims, dd))
+            for a in range(3)]
+    if not all(e <= 1e-9 for e in errs):  # also when NaN
         raise InputError(source, f"tasks[{space.task.id}].template",
                          f"{space.template}'s space is not affine in its parameters; the "
                          "optimized mode cannot bake it")
-    return dc, dd
+    return np.array(dc), np.array(dd)
 
 
 def _search_fields(results: Sequence[PrecomputeResult], T: int) -> dict[str, np.ndarray]:

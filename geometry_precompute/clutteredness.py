@@ -59,6 +59,30 @@ def overlap_volumes(shapes: Sequence[Shape], sections: int,
     return vols, {p: out[p] for p in pairs}
 
 
+def clutteredness_of_sets(sets: Sequence[tuple[Sequence[Shape], Iterable[tuple[int, int]]]],
+                          sections: int = 32) -> list[float]:
+    """C of several sets of shapes, each with its candidate pairs, from one
+    :func:`overlap_volumes` call (the precompute's C_init and C_final together: the
+    fast paths cost mostly per call, not per pair)."""
+    shapes: list[Shape] = []
+    candidates: list[tuple[int, int]] = []
+    bounds = []
+    for set_shapes, set_pairs in sets:
+        k = len(shapes)
+        shapes.extend(set_shapes)
+        candidates.extend((i + k, j + k) for i, j in set_pairs)
+        bounds.append((k, len(shapes)))
+    vols, pairs = overlap_volumes(shapes, sections, candidates)
+    out = []
+    for lo, hi in bounds:
+        if hi - lo < 2:
+            out.append(0.0)
+            continue
+        inter = sum(v for (i, _), v in pairs.items() if lo <= i < hi)
+        out.append(float(inter / sum(vols[lo:hi])))
+    return out
+
+
 def clutteredness(shapes: Sequence[Shape], sections: int = 32,
                   candidates: Iterable[tuple[int, int]] | None = None,
                   method: str = "fast") -> float:

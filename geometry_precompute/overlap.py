@@ -36,8 +36,10 @@ from .shapes import Shape
 AXIS_TOL = 1e-12
 # Gauss nodes per smooth piece of the cone x cylinder integral.
 NODES_CYL = 8
-# Gauss nodes per smooth piece, along and across the axis, of the cone x cone integral.
-NODES_CONE = 8
+# Gauss nodes per smooth piece, along and across the first axis, of the cone x cone
+# integral (on 45 random pairs against 1024-gon booleans, 8 x 6 and 8 x 8 both err by at
+# most 3.9e-6 of the volume, 6 x 6 by 7.6e-5).
+NODES_CONE_T, NODES_CONE_U = 8, 6
 
 
 @cache
@@ -229,9 +231,9 @@ def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
         ec = (A + 1) * m0 * m0 + b0 * m0 + c0
         ev += list(_real_roots_quadratic(ea, eb, ec).T)
     ev = np.where(np.isfinite(np.stack(ev, 1)), np.stack(ev, 1), np.nan)
-    t, wt_, k = _pieces(lo, hi, ev, NODES_CONE)          # (Mt, NT)
+    t, wt_, k = _pieces(lo, hi, ev, NODES_CONE_T)          # (Mt, NT)
     t, wt_ = t.ravel(), wt_.ravel()
-    k = np.repeat(k, NODES_CONE)
+    k = np.repeat(k, NODES_CONE_T)
     rho = T1[k] * t
     S, W = s0[k] + st[k] * t, w0[k] + wt[k] * t
     Su, Wu, T2k, L2k = su[k], wu[k], T2[k], L2[k]
@@ -243,7 +245,7 @@ def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
         ub += list(_real_roots_quadratic(A[k] + 1, Bk, Ck).T)
     ub = np.stack(ub, 1)
     ub = np.where(np.isfinite(ub), ub, np.nan)
-    u, wu_, j = _pieces(-rho, rho, ub, NODES_CONE)      # (Mu, NU), owner t node
+    u, wu_, j = _pieces(-rho, rho, ub, NODES_CONE_U)      # (Mu, NU), owner t node
     tj = t[j][:, None]
     kj = k[j]
     h1 = np.sqrt(np.maximum((T1[kj][:, None] * tj) ** 2 - u * u, 0.0))

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .clusters import clusters_from_pairs, intersecting_pairs
-from .clutteredness import clutteredness
+from .clutteredness import clutteredness_of_sets
 from .errors import InputError
 from .intersect import SpaceSet
 from .metrics import entropic_clutteredness, mean_distance
@@ -24,6 +24,11 @@ from .settings import Settings
 from .shapes import Shape
 from .shrinking import shrink
 from .templates import TaskSpace, resolve_tasks
+
+# Part of every precompute cache key: raised when the same scene and settings would
+# give other answers (2: fast intersection volumes, issue 15), so that results cached
+# by an earlier version are computed again rather than mixed with new ones.
+PRECOMPUTE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -83,25 +88,28 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
     pairs = intersecting_pairs(coll)
     clusters = clusters_from_pairs(len(spaces), pairs)
     t2 = time.perf_counter()
-    # Volumes only for the pairs found intersecting (clutteredness.py says why).
-    c_init = clutteredness(shapes_init, sections, pairs)
-    t3 = time.perf_counter()
-    if c_init > 0.0:
+    if pairs:  # SPEC section 7: a scene with C_init = 0 is left as it is (below)
         res = shrink(spaces, s["shrink_step"], s["shrink_max_iter"], space_set=coll,
                      pairs=pairs)
         q_opt, iterations, still = res.q_opt, res.iterations, res.still_intersecting
         shapes_opt = [sp.shape(q) for sp, q in zip(spaces, q_opt, strict=True)]
-    else:  # SPEC section 7: a scene with C_init = 0 is left as it is.
+    t3 = time.perf_counter()
+    # Volumes only for the pairs found intersecting (clutteredness.py says why); C_init
+    # and C_final in one call.
+    if pairs:
+        c_init, c_final = clutteredness_of_sets([(shapes_init, pairs), (shapes_opt, still)],
+                                                sections)
+    else:
+        c_init = c_final = 0.0
+    if c_init == 0.0:  # no overlap of positive volume: nothing to shrink
         q_opt, iterations, still = [sp.q_init.copy() for sp in spaces], 0, []
-        shapes_opt = list(shapes_init)
+        shapes_opt, c_final = list(shapes_init), 0.0
     t4 = time.perf_counter()
-    c_final = clutteredness(shapes_opt, sections, still) if c_init > 0.0 else 0.0
-    t5 = time.perf_counter()
     positions = [o.position for o in scene.objects]
     d = mean_distance(positions)
     h = entropic_clutteredness(positions, s["entropy_variant"])
     t6 = time.perf_counter()
-    seconds = {"spaces": t1 - t0, "clusters": t2 - t1, "C_init": t3 - t2, "shrinking": t4 - t3,
-               "C_final": t5 - t4, "metrics": t6 - t5, "total": t6 - t0}
+    seconds = {"spaces": t1 - t0, "clusters": t2 - t1, "shrinking": t3 - t2,
+               "C_init_and_final": t4 - t3, "metrics": t6 - t4, "total": t6 - t0}
     return PrecomputeResult(scene, s, spaces, shapes_init, shapes_opt, q_opt, c_init, c_final,
                             clusters, iterations, still, d, h, seconds)

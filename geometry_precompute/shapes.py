@@ -18,6 +18,7 @@ The integer codes in :data:`KIND_CODES` are the ones baked for the JAX half.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -58,14 +59,28 @@ class Shape:
         return np.array([-a, -b, -c]), np.array([a, b, c])
 
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
-        """A world axis-aligned box that contains the shape (its local box, rotated)."""
-        lo, hi = self.local_bounds()
-        half = (hi - lo) / 2.0
-        mid = (hi + lo) / 2.0
-        rot = self.rotation
-        center = np.asarray(self.center) + rot @ mid
-        ext = np.abs(rot) @ half
-        return center - ext, center + ext
+        """A world axis-aligned box that contains the shape (its local box, rotated).
+        Written in floats: the precompute asks for one per space and scene."""
+        a, b, c = self.dims
+        if self.kind in ("cylinder", "disk"):
+            mid, half = (0.0, 0.0, 0.0), (a, a, b / 2)
+        elif self.kind == "cone":
+            radius = a * math.tan(b)
+            mid, half = (0.0, 0.0, a / 2), (radius, radius, a / 2)
+        else:
+            mid, half = (0.0, 0.0, 0.0), (a, b, c)
+        rot = self._rows
+        lo, hi = [], []
+        for row, x in zip(rot, self.center, strict=True):
+            cx = x + row[0] * mid[0] + row[1] * mid[1] + row[2] * mid[2]
+            ex = abs(row[0]) * half[0] + abs(row[1]) * half[1] + abs(row[2]) * half[2]
+            lo.append(cx - ex)
+            hi.append(cx + ex)
+        return np.array(lo), np.array(hi)
+
+    @cached_property
+    def _rows(self) -> list[list[float]]:
+        return self.rotation.tolist()
 
 
 def rotation_matrix(q) -> np.ndarray:

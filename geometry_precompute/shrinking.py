@@ -1,43 +1,63 @@
-"""Shrinking (SPEC section 7), exactly as its pseudocode says.
+"""Shrinking (SPEC section 7), with the answers of its pseudocode.
 
 All spaces that intersect another (section 6's test) and can still shrink lose
 the same fraction ``sigma`` of their own parameter range at once, until no space
-that intersects can shrink. Parameters only ever decrease and every template's
-space is monotone in its parameters, so a pair that stops intersecting never
-intersects again: each pass retests only the pairs that intersected before it and
-of which a space shrank, and the loop ends within ceil(1 / sigma) passes.
+that intersects can shrink. That loop is computed without running it pass by pass:
 
-A retest is skipped when its answer is certain: the overlap (penetration depth)
-of two convex spaces falls by at most the distances their surfaces moved
-(support functions), and a pass moves a surface by at most :func:`step_bound`. A
-pair that overlapped by more than the sum of its moves since its last test, with
-coal's depth discounted by ``COAL_DEPTH_MARGIN``, still intersects.
+- While a pair intersects, both its tasks are in the overlapping set, so both
+  shrink at every pass (or sit at their minimum): after k passes the pair's spaces
+  are each task's k-th shrink, a sequence known in advance.
+- Parameters only fall and every template's space is monotone in them, so along
+  that sequence the pair intersects up to some pass and never again: the first pass
+  after which it no longer intersects is found by bisection (a handful of tests
+  instead of one per pass), or the pair still intersects with both tasks at their
+  minimum and never separates.
+- A pass happens while some intersecting pair has a task that can still shrink, so
+  the number of passes, each task's number of shrinks and the pairs that still
+  intersect at the end follow from those first passes.
+
+The parameters are floats throughout (the same IEEE operations as the pseudocode's
+arrays), and tests/test_shrinking.py runs the pseudocode itself on random scenes and
+compares every result, bit for bit.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .intersect import INTERSECT_TOL, SpaceSet
-from .shapes import Shape
+from .intersect import SpaceSet
 from .templates import TaskSpace
 
-# How far coal's penetration depth (EPA) may overstate the truth: 100x its tolerance.
-COAL_DEPTH_MARGIN = 1e-4
+
+def _shrunk(q: tuple, q_min: tuple, step: tuple) -> tuple:
+    """max(q_min, q - step), componentwise (templates have one or two parameters)."""
+    if len(q) == 1:
+        return (max(q_min[0], q[0] - step[0]),)
+    return tuple(max(m, v - d) for v, m, d in zip(q, q_min, step, strict=True))
 
 
-def step_bound(old: Shape, new: Shape) -> float:
-    """An upper bound on how far any point of ``old`` lies from ``new`` (new inside old,
-    same rotation): the most a surface moved."""
-    moved = math.dist(old.center, new.center)
-    (a, b, c), (a2, b2, c2) = old.dims, new.dims
-    if old.kind == "cone":
-        return moved + (a - a2) + abs(a * math.tan(b) - a2 * math.tan(b2))
-    return moved + 2.0 * (abs(a - a2) + abs(b - b2) + abs(c - c2))
+def _above(q: tuple, q_min: tuple, slack: tuple) -> bool:
+    """Some component above its minimum by more than the slack (1e-9 of its range)."""
+    if len(q) == 1:
+        return q[0] - q_min[0] > slack[0]
+    return any(v - m > e for v, m, e in zip(q, q_min, slack, strict=True))
+
+
+def shrink_sequence(space: TaskSpace, sigma: float, max_iter: int) -> list[tuple]:
+    """The task's parameters after 0, 1, ... shrinks, up to the first at its minimum
+    (or max_iter shrinks): element k is what k passes of the pseudocode give."""
+    q = tuple(float(v) for v in space.q_init)
+    q_min = tuple(float(v) for v in space.q_min)
+    step = tuple(float(v) for v in sigma * (space.q_init - space.q_min))
+    slack = tuple(float(v) for v in 1e-9 * (space.q_init - space.q_min))
+    seq = [q]
+    while len(seq) <= max_iter and _above(q, q_min, slack):
+        q = _shrunk(q, q_min, step)
+        seq.append(q)
+    return seq
 
 
 @dataclass(frozen=True)
@@ -50,49 +70,54 @@ class ShrinkResult:
 def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 1000,
            space_set: SpaceSet | None = None, history: list | None = None,
            pairs: Sequence[tuple[int, int]] | None = None) -> ShrinkResult:
-    """Run SPEC section 7's loop. ``space_set`` (the initial spaces) is reused and
-    updated in place when given, ``pairs`` (its intersecting pairs) likewise;
-    ``history``, when given, receives a copy of every task's parameters after each
+    """SPEC section 7's loop (module docstring). ``space_set`` (the initial spaces) is
+    reused and updated in place when given, ``pairs`` (its intersecting pairs)
+    likewise; ``history``, when given, receives every task's parameters after each
     pass."""
-    # Parameters as tuples of floats: the same IEEE arithmetic as NumPy's, without its
-    # per-call cost in a loop of a few hundred steps.
-    q = [tuple(float(v) for v in s.q_init) for s in spaces]
-    q_min = [tuple(float(v) for v in s.q_min) for s in spaces]
-    step = [tuple(float(v) for v in sigma * (s.q_init - s.q_min)) for s in spaces]
-    slack = [tuple(float(v) for v in 1e-9 * (s.q_init - s.q_min)) for s in spaces]
-    can_shrink = [any(v - m > e for v, m, e in zip(q[i], q_min[i], slack[i], strict=True))
-                  for i in range(len(spaces))]
     coll = space_set if space_set is not None else SpaceSet([s.shape() for s in spaces])
     active = list(pairs) if pairs is not None else coll.intersecting_pairs()
-    iterations = 0
-    shapes = list(coll.shapes)
-    sure = {p: 0.0 for p in active}  # overlap known to remain, by each pair's last test
-    for _ in range(max_iter):
-        shrinkable = sorted({i for p in active for i in p if can_shrink[i]})
-        if not shrinkable:
-            break
-        move = {}
-        for i in shrinkable:
-            q[i] = qi = tuple(max(m, v - d) for v, m, d in zip(q[i], q_min[i], step[i],
-                                                               strict=True))
-            can_shrink[i] = any(v - m > e for v, m, e in zip(qi, q_min[i], slack[i],
-                                                             strict=True))
-            new = spaces[i].shape_of(qi)
-            move[i] = step_bound(shapes[i], new)
-            shapes[i] = new
-            coll.update(i, new)
-        iterations += 1
-        if history is not None:
-            history.append([np.array(x) for x in q])
-        kept = []
-        for i, j in active:
-            if i in move or j in move:
-                sure[(i, j)] -= move.get(i, 0.0) + move.get(j, 0.0)
-                if not sure[(i, j)] > INTERSECT_TOL:
-                    d, exact = coll.depth(i, j)
-                    if not d > INTERSECT_TOL:
-                        continue
-                    sure[(i, j)] = d if exact else d - COAL_DEPTH_MARGIN
-            kept.append((i, j))
-        active = kept
-    return ShrinkResult([np.array(x) for x in q], iterations, active)
+    seqs = [shrink_sequence(s, sigma, max_iter) for s in spaces]
+    last = [len(q) - 1 for q in seqs]  # shrinks each task can make
+    shapes: dict[tuple[int, int], object] = {}
+
+    def intersects_after(i: int, j: int, k: int) -> bool:
+        for t in (i, j):
+            kt = min(k, last[t])
+            shape = shapes.get((t, kt))
+            if shape is None:
+                shape = shapes[(t, kt)] = spaces[t].shape_of(seqs[t][kt])
+            coll.update(t, shape)
+        return coll.intersects(i, j)
+
+    # The first pass after which each pair no longer intersects (inf: never).
+    first_apart = {}
+    for i, j in active:
+        end = max(last[i], last[j])
+        if end == 0 or intersects_after(i, j, end):
+            first_apart[(i, j)] = np.inf
+            continue
+        lo, hi = 0, end  # intersects after lo passes, not after hi
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if intersects_after(i, j, mid):
+                lo = mid
+            else:
+                hi = mid
+        first_apart[(i, j)] = hi
+    # Pass k happens while a pair that intersects after k - 1 passes has a task that can
+    # still shrink: the passes form a prefix, as long as the longest pair keeps going.
+    iterations = int(max((min(first_apart[p], max(last[p[0]], last[p[1]])) for p in active),
+                         default=0))
+    iterations = min(iterations, max_iter)
+    reach = [0.0] * len(spaces)
+    for (i, j), k in first_apart.items():
+        reach[i], reach[j] = max(reach[i], k), max(reach[j], k)
+    shrinks = [int(min(iterations, last[i], reach[i])) for i in range(len(spaces))]
+    if history is not None:
+        for k in range(1, iterations + 1):
+            history.append([np.array(seqs[i][min(k, shrinks[i])]) for i in range(len(spaces))])
+    for i in range(len(spaces)):
+        coll.update(i, spaces[i].shape_of(seqs[i][shrinks[i]]))
+    still = [p for p in active if first_apart[p] > iterations]
+    return ShrinkResult([np.array(seqs[i][shrinks[i]]) for i in range(len(spaces))],
+                        iterations, still)

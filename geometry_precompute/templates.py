@@ -15,7 +15,7 @@ from functools import cached_property
 import numpy as np
 
 from .errors import InputError
-from .frames import frame_from_approach, quat_of_rotation, yaw_matrix
+from .frames import quat_of_approach, quat_of_rotation, yaw_matrix
 from .scene import TEMPLATE_PARAMS, Scene, SceneObject, Task
 from .settings import Settings
 from .shapes import Shape
@@ -99,7 +99,7 @@ def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarra
 
 def _pose_quat(template: str, obj: SceneObject) -> tuple[float, float, float, float]:
     if template == "handle_grasp":
-        return _quat(frame_from_approach((np.cos(obj.yaw), np.sin(obj.yaw), 0.0)))
+        return quat_of_approach((np.cos(obj.yaw), np.sin(obj.yaw), 0.0))
     if template == "drawer_pull":
         return _quat(yaw_matrix(obj.yaw))
     return IDENTITY
@@ -149,14 +149,14 @@ def _template_values(template: str, obj: SceneObject, s: Settings) -> tuple[dict
 def _orientation(template: str, obj: SceneObject, s: Settings) -> OrientationSpace:
     if template == "side_grasp":
         yaw_dir = (np.cos(obj.yaw), np.sin(obj.yaw), 0.0)
-        return OrientationSpace("point_to_axis", _quat(frame_from_approach(yaw_dir)),
+        return OrientationSpace("point_to_axis", quat_of_approach(yaw_dir),
                                 (obj.position[0], obj.position[1]))
     if template == "handle_grasp":
         _, u = handle_point(obj, s["handle_grasp.handle_offset"])
-        return OrientationSpace("fixed", _quat(frame_from_approach(-u)))
+        return OrientationSpace("fixed", quat_of_approach(-u))
     if template == "top_grasp":
-        return OrientationSpace("fixed", _quat(frame_from_approach((0.0, 0.0, -1.0))))
-    return OrientationSpace("fixed", _quat(frame_from_approach(yaw_matrix(obj.yaw)[:, 0])))
+        return OrientationSpace("fixed", quat_of_approach((0.0, 0.0, -1.0)))
+    return OrientationSpace("fixed", quat_of_approach(yaw_matrix(obj.yaw)[:, 0]))
 
 
 def resolve_task(scene: Scene, task: Task, settings: Settings) -> TaskSpace:

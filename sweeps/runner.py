@@ -38,6 +38,7 @@ import pyarrow.parquet as pq
 from tqdm import tqdm
 
 from geometry_precompute import DEFAULTS, InputError, bake, precompute
+from geometry_precompute.precompute import PRECOMPUTE_VERSION
 from geometry_precompute.scene import Scene, scene_to_dict
 from shacc_jax.types import OUTCOMES
 
@@ -87,8 +88,8 @@ def plan(cfg: SweepConfig, n_scenes: int, chunk: int) -> list[Chunk]:
 
 
 def cache_key(scene: Scene, settings) -> str:
-    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute")},
-                      sort_keys=True, default=str).encode()
+    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute"),
+                       "version": PRECOMPUTE_VERSION}, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()
 
 

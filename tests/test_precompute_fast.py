@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -29,7 +29,6 @@ from geometry_precompute.frames import (
 from geometry_precompute.meshes import shape_manifold
 from geometry_precompute.overlap import disk_rect_area, fast_volumes, lens_area, pair_kind
 from geometry_precompute.shapes import Shape
-from geometry_precompute.shrinking import step_bound
 
 DATA = Path(__file__).parent / "data"
 IDENT = (1.0, 0.0, 0.0, 0.0)
@@ -201,47 +200,6 @@ def test_clusters_match_scipy(n, edges):
     assert clusters_from_pairs(n, pairs) == expected
 
 
-def _extreme_points(s: Shape) -> np.ndarray:
-    """The extreme points of a shape (apex and rims, or corners), exactly: the largest
-    distance from a convex set to another is reached at one of them."""
-    a, b, c = s.dims
-    ang = np.linspace(0, 2 * np.pi, 721)[:-1]
-    ring = np.stack([np.cos(ang), np.sin(ang), 0 * ang], 1)
-    if s.kind == "cone":
-        local = np.concatenate([[[0.0, 0.0, 0.0]], ring * a * np.tan(b) + [0, 0, a]])
-    elif s.kind == "box":
-        local = np.array([[x, y, z] for x in (-a, a) for y in (-b, b) for z in (-c, c)])
-    else:
-        local = np.concatenate([ring * a + [0, 0, -b / 2], ring * a + [0, 0, b / 2]])
-    return local @ s.rotation.T + np.asarray(s.center)
-
-
-@settings(max_examples=30)
-@given(st.floats(0.0, 0.9), st.floats(0.0, 0.9), st.integers(0, 3))
-def test_step_bound_bounds_every_point(f1, f2, which):
-    """Every point of the old space lies within step_bound of the new one (distances
-    to a 512-gon mesh of the new space, from the old one's extreme points)."""
-    import trimesh
-
-    old = [level_cone((0.0, 0.0, 0.05), 0.4, 0.2, 0.6),
-           upright((0.0, 0.0, 0.05), 0.1, 0.1),
-           upright((0.0, 0.0, 0.05), 0.1, 0.01, "disk"),
-           Shape("box", (0.05, 0.0, 0.05), IDENT, (0.05, 0.04, 0.03))][which]
-    a, b, c = old.dims
-    if old.kind == "cone":
-        new = Shape("cone", old.center, old.quat, (a * (1 - f1), b * (1 - f2), 0.0))
-    elif old.kind == "box":  # the near face (local -x) stays
-        d = a * (1 - f1)
-        new = Shape("box", (old.center[0] - a + d, *old.center[1:]), old.quat, (d, b, c))
-    else:
-        new = Shape(old.kind, old.center, old.quat, (a * (1 - f1), b, 0.0))
-    m = shape_manifold(new, 512).to_mesh64()
-    mesh = trimesh.Trimesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts),
-                           process=False)
-    dist = np.maximum(-trimesh.proximity.signed_distance(mesh, _extreme_points(old)), 0.0)
-    assert dist.max() <= step_bound(old, new) + 1e-5
-
-
 # --- the precompute against its recorded answers (issue 15) -------------------------
 
 @pytest.fixture(scope="module")
@@ -253,6 +211,17 @@ def recorded():
         sys.path.remove(str(DATA))
     ref = json.loads((DATA / "precompute_reference.json").read_text())
     return [(key, sc, ref[key]) for key, sc in scenes()]
+
+
+def test_cache_key_names_the_precompute_version(monkeypatch):
+    """Results cached before the fast volumes are computed again, not mixed in."""
+    import sweeps.runner as runner
+    from geometry_precompute import DEFAULTS, random_scene
+
+    sc = random_scene(3, "uniform", 3, 3)
+    key = runner.cache_key(sc, DEFAULTS)
+    monkeypatch.setattr(runner, "PRECOMPUTE_VERSION", 1)
+    assert runner.cache_key(sc, DEFAULTS) != key
 
 
 def test_recorded_scenes_cover_the_set(recorded):
