@@ -19,14 +19,9 @@ from collections.abc import Iterable, Sequence
 
 from .meshes import shape_manifold
 from .overlap import fast_volumes
-from .shapes import Shape
+from .shapes import Shape, aabbs_overlap
 
 METHODS = ("fast", "boolean")
-
-
-def _boxes_overlap(a: Shape, b: Shape) -> bool:
-    (alo, ahi), (blo, bhi) = a.aabb(), b.aabb()
-    return bool((alo <= bhi).all() and (blo <= ahi).all())
 
 
 def overlap_volumes(shapes: Sequence[Shape], sections: int,
@@ -42,18 +37,18 @@ def overlap_volumes(shapes: Sequence[Shape], sections: int,
     n = len(shapes)
     if candidates is None:
         candidates = [(i, j) for i in range(n) for j in range(i + 1, n)]
-        pairs = [(i, j) for i, j in candidates if _boxes_overlap(shapes[i], shapes[j])]
+        boxes = [s.aabb() for s in shapes]
+        pairs = [(i, j) for i, j in candidates if aabbs_overlap(boxes[i], boxes[j])]
     else:  # pairs found intersecting: their boxes overlap
         pairs = list(candidates)
     if method == "fast":
         vols = [s.volume() for s in shapes]
         out, rest = fast_volumes(shapes, pairs)
+        mans = {k: shape_manifold(shapes[k], sections) for k in {k for p in rest for k in p}}
     else:
-        vols, out, rest = None, {}, pairs
-    need = sorted({k for p in rest for k in p}) if vols is not None else range(n)
-    mans = {k: shape_manifold(shapes[k], sections) for k in need}
-    if vols is None:
+        mans = {k: shape_manifold(shapes[k], sections) for k in range(n)}
         vols = [mans[k].volume() for k in range(n)]
+        out, rest = {}, pairs
     for i, j in rest:
         out[(i, j)] = (mans[i] ^ mans[j]).volume()
     return vols, {p: out[p] for p in pairs}

@@ -3,12 +3,12 @@
 Two spaces *intersect* when they overlap by more than 1e-9 m (coal's signed
 distance below -1e-9 m; touching does not count). Two upright cylinders or disks
 (axis along world z) are answered in closed form: they overlap by min(r1 + r2 - d,
-overlap of the z ranges), the exact penetration depth of two coaxial-direction
+overlap of the z ranges), the exact penetration depth of two parallel vertical
 cylinders. Every other pair goes to coal. :class:`SpaceSet` keeps one coal
 geometry and transform per space and brings them up to date only when a pair that
 needs coal asks (Shrinking changes many spaces that only meet upright cylinders);
-every query clears its result first. Pairs whose bounding boxes are disjoint are
-answered without a call.
+every query clears its result first. :meth:`SpaceSet.intersecting_pairs` tests
+only the pairs whose bounding boxes overlap.
 """
 
 from __future__ import annotations
@@ -21,12 +21,11 @@ import numpy as np
 
 from .errors import InputError
 from .scene import INTERPENETRATION_TOL, Scene
-from .shapes import Shape
+from .shapes import Shape, is_upright
 
 INTERSECT_TOL = 1e-9
 # Flips a coal cone (apex at +halfLength) onto ours (apex at the origin, axis +z).
 _FLIP_X = np.diag([1.0, -1.0, -1.0])
-_UPRIGHT_TOL = 1e-12
 
 
 def _coal_geometry(shape: Shape):
@@ -63,10 +62,6 @@ def _set_transform(tf: coal.Transform3s, shape: Shape) -> None:
     tf.setTranslation(_coal_translation(shape, tuple(rot[:, 2].tolist())))
 
 
-def _upright(shape: Shape) -> bool:
-    return shape.kind in ("cylinder", "disk") and abs(shape.rotation[2, 2] - 1.0) <= _UPRIGHT_TOL
-
-
 def upright_overlap(a: Shape, b: Shape) -> float:
     """Penetration depth of two upright cylinders (negative: apart by at least that)."""
     d = math.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1])
@@ -80,7 +75,7 @@ class SpaceSet:
 
     def __init__(self, shapes: Sequence[Shape]):
         self.shapes = list(shapes)
-        self.upright = [_upright(s) for s in self.shapes]
+        self.upright = [is_upright(s) for s in self.shapes]
         self.geoms: list = [None] * len(self.shapes)
         self.tfs: list = [None] * len(self.shapes)
         self._stale = [True] * len(self.shapes)
@@ -132,15 +127,10 @@ class SpaceSet:
         self._res.clear()
         return float(coal.distance(gi, ti, gj, tj, self._req, self._res))
 
-    def depth(self, i: int, j: int) -> tuple[float, bool]:
-        """(how far the two spaces overlap, whether that is exact): the closed form for
-        two upright cylinders, else minus coal's signed distance (EPA's estimate)."""
-        if self.upright[i] and self.upright[j]:
-            return upright_overlap(self.shapes[i], self.shapes[j]), True
-        return -self.signed_distance(i, j), False
-
     def intersects(self, i: int, j: int, tol: float = INTERSECT_TOL) -> bool:
-        return self.depth(i, j)[0] > tol
+        if self.upright[i] and self.upright[j]:
+            return upright_overlap(self.shapes[i], self.shapes[j]) > tol
+        return self.signed_distance(i, j) < -tol
 
     def intersecting_pairs(self) -> list[tuple[int, int]]:
         return [(i, j) for i, j in self.candidate_pairs() if self.intersects(i, j)]

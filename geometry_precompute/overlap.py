@@ -30,10 +30,8 @@ from functools import cache
 
 import numpy as np
 
-from .shapes import Shape
+from .shapes import AXIS_TOL, Shape, is_level, is_upright
 
-# A shape is taken as upright or level when its axis is within this of the ideal.
-AXIS_TOL = 1e-12
 # Gauss nodes per smooth piece of the cone x cylinder integral.
 NODES_CYL = 8
 # Gauss nodes per smooth piece, along and across the first axis, of the cone x cone
@@ -172,9 +170,11 @@ def cone_cylinder_volumes(apex, axis, length, tan_a, center, radius, height):
 
 
 def _lin(num, den):
+    """num / den, NaN where that is not a finite number (no root)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         out = num / den
     return np.where(np.isfinite(out), out, np.nan)
+
 
 def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
     """Volumes common to pairs of level cones whose apexes are at one height (arrays as
@@ -221,30 +221,26 @@ def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
     # its double roots: B^2 - 4 (A + 1) C' = 0
     a4 = 4 * (A + 1)
     qa, qb, qc = b1 * b1 - a4 * c2, 2 * b0 * b1 - a4 * c1, b0 * b0 - a4 * c0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ev += list(_real_roots_quadratic(qa, qb, qc).T)
-        # it meets s2 = L2: u = (L2 - s0 - st t) / su = m0 + m1 t
-        m0, m1 = (L2 - s0) / su, -st / su
-        # (A+1) u^2 + (b0 + b1 t) u + c0 + c1 t + c2 t^2 = 0
-        ea = (A + 1) * m1 * m1 + b1 * m1 + c2
-        eb = 2 * (A + 1) * m0 * m1 + b0 * m1 + b1 * m0 + c1
-        ec = (A + 1) * m0 * m0 + b0 * m0 + c0
-        ev += list(_real_roots_quadratic(ea, eb, ec).T)
-    ev = np.where(np.isfinite(np.stack(ev, 1)), np.stack(ev, 1), np.nan)
+    ev += list(_real_roots_quadratic(qa, qb, qc).T)
+    # it meets s2 = L2: u = (L2 - s0 - st t) / su = m0 + m1 t (none when su = 0), so
+    # (A+1) u^2 + (b0 + b1 t) u + c0 + c1 t + c2 t^2 = 0 is a quadratic in t
+    m0, m1 = _lin(L2 - s0, su), _lin(-st, su)
+    ea = (A + 1) * m1 * m1 + b1 * m1 + c2
+    eb = 2 * (A + 1) * m0 * m1 + b0 * m1 + b1 * m0 + c1
+    ec = (A + 1) * m0 * m0 + b0 * m0 + c0
+    ev += list(_real_roots_quadratic(ea, eb, ec).T)
+    ev = np.stack(ev, 1)  # NaN for the roots that do not exist
     t, wt_, k = _pieces(lo, hi, ev, NODES_CONE_T)          # (Mt, NT)
     t, wt_ = t.ravel(), wt_.ravel()
     k = np.repeat(k, NODES_CONE_T)
     rho = T1[k] * t
     S, W = s0[k] + st[k] * t, w0[k] + wt[k] * t
     Su, Wu, T2k, L2k = su[k], wu[k], T2[k], L2[k]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ub = [_lin(-S, Su), _lin(L2k - S, Su), _lin(W - T2k * S, T2k * Su - Wu),
-              _lin(-W - T2k * S, T2k * Su + Wu)]
-        Bk = b0[k] + b1[k] * t
-        Ck = c0[k] + c1[k] * t + (c2[k] + T1[k] ** 2) * t * t - rho * rho
-        ub += list(_real_roots_quadratic(A[k] + 1, Bk, Ck).T)
-    ub = np.stack(ub, 1)
-    ub = np.where(np.isfinite(ub), ub, np.nan)
+    ub = [_lin(-S, Su), _lin(L2k - S, Su), _lin(W - T2k * S, T2k * Su - Wu),
+          _lin(-W - T2k * S, T2k * Su + Wu)]
+    Bk = b0[k] + b1[k] * t
+    Ck = c0[k] + c1[k] * t + (c2[k] + T1[k] ** 2) * t * t - rho * rho
+    ub = np.stack(ub + list(_real_roots_quadratic(A[k] + 1, Bk, Ck).T), 1)
     u, wu_, j = _pieces(-rho, rho, ub, NODES_CONE_U)      # (Mu, NU), owner t node
     tj = t[j][:, None]
     kj = k[j]
@@ -257,24 +253,16 @@ def cone_cone_volumes(apex1, axis1, length1, tan1, apex2, axis2, length2, tan2):
     return np.bincount(k, weights=wt_ * inner, minlength=len(lo))
 
 
-def _upright(s: Shape) -> bool:
-    return s.kind in ("cylinder", "disk") and abs(s.rotation[2, 2] - 1.0) <= AXIS_TOL
-
-
-def _level(s: Shape) -> bool:
-    return s.kind == "cone" and abs(s.rotation[2, 2]) <= AXIS_TOL
-
-
 def pair_kind(a: Shape, b: Shape) -> str | None:
     """'cyl_cyl', 'cone_cyl', 'cyl_cone', 'cone_cone', or None (the pair needs a
     boolean)."""
-    if _upright(a):
-        return "cyl_cyl" if _upright(b) else "cyl_cone" if _level(b) else None
-    if not _level(a):
+    if is_upright(a):
+        return "cyl_cyl" if is_upright(b) else "cyl_cone" if is_level(b) else None
+    if not is_level(a):
         return None
-    if _upright(b):
+    if is_upright(b):
         return "cone_cyl"
-    if _level(b) and abs(a.center[2] - b.center[2]) <= AXIS_TOL:
+    if is_level(b) and abs(a.center[2] - b.center[2]) <= AXIS_TOL:
         return "cone_cone"
     return None
 

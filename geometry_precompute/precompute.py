@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .clusters import clusters_from_pairs, intersecting_pairs
+from .clusters import clusters_from_pairs
 from .clutteredness import clutteredness_of_sets
 from .errors import InputError
 from .intersect import SpaceSet
@@ -85,7 +85,7 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
     sections = s["mesh_sections"]
     t1 = time.perf_counter()
     coll = SpaceSet(shapes_init)
-    pairs = intersecting_pairs(coll)
+    pairs = coll.intersecting_pairs()
     clusters = clusters_from_pairs(len(spaces), pairs)
     t2 = time.perf_counter()
     if pairs:  # SPEC section 7: a scene with C_init = 0 is left as it is (below)

@@ -49,29 +49,22 @@ class Shape:
             return float(np.pi / 3.0 * radius * radius * a)
         return float(8.0 * a * b * c)
 
-    def local_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def _local_box(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(centre, half extents) of the shape's box in its local frame."""
         a, b, c = self.dims
         if self.kind in ("cylinder", "disk"):
-            return np.array([-a, -a, -b / 2]), np.array([a, a, b / 2])
+            return (0.0, 0.0, 0.0), (a, a, b / 2)
         if self.kind == "cone":
-            radius = a * np.tan(b)
-            return np.array([-radius, -radius, 0.0]), np.array([radius, radius, a])
-        return np.array([-a, -b, -c]), np.array([a, b, c])
+            radius = a * math.tan(b)
+            return (0.0, 0.0, a / 2), (radius, radius, a / 2)
+        return (0.0, 0.0, 0.0), (a, b, c)
 
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
         """A world axis-aligned box that contains the shape (its local box, rotated).
         Written in floats: the precompute asks for one per space and scene."""
-        a, b, c = self.dims
-        if self.kind in ("cylinder", "disk"):
-            mid, half = (0.0, 0.0, 0.0), (a, a, b / 2)
-        elif self.kind == "cone":
-            radius = a * math.tan(b)
-            mid, half = (0.0, 0.0, a / 2), (radius, radius, a / 2)
-        else:
-            mid, half = (0.0, 0.0, 0.0), (a, b, c)
-        rot = self._rows
+        mid, half = self._local_box()
         lo, hi = [], []
-        for row, x in zip(rot, self.center, strict=True):
+        for row, x in zip(self._rows, self.center, strict=True):
             cx = x + row[0] * mid[0] + row[1] * mid[1] + row[2] * mid[2]
             ex = abs(row[0]) * half[0] + abs(row[1]) * half[1] + abs(row[2]) * half[2]
             lo.append(cx - ex)
@@ -81,6 +74,20 @@ class Shape:
     @cached_property
     def _rows(self) -> list[list[float]]:
         return self.rotation.tolist()
+
+
+# A space counts as upright (axis along world z) or level (axis horizontal) within this.
+AXIS_TOL = 1e-12
+
+
+def is_upright(s: Shape) -> bool:
+    """A cylinder or disk whose axis is world z (side and top grasps)."""
+    return s.kind in ("cylinder", "disk") and abs(s.rotation[2, 2] - 1.0) <= AXIS_TOL
+
+
+def is_level(s: Shape) -> bool:
+    """A cone whose axis is horizontal (handle grasps)."""
+    return s.kind == "cone" and abs(s.rotation[2, 2]) <= AXIS_TOL
 
 
 def rotation_matrix(q) -> np.ndarray:

@@ -52,10 +52,8 @@ class TaskSpace:
 
     def shape_of(self, q: tuple[float, ...]) -> Shape:
         """:meth:`shape` for a tuple of floats (Shrinking's inner loop)."""
-        center = self._fixed_center
-        if center is None:
-            return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat)
-        return Shape(_KIND[self.template], center, self.pose_quat, _dims(self, q))
+        return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat,
+                            self._fixed_center)
 
     @cached_property
     def _fixed_center(self) -> tuple[float, float, float] | None:
@@ -66,27 +64,12 @@ class TaskSpace:
                             self.pose_quat).center
 
 
-_KIND = {"side_grasp": "cylinder", "handle_grasp": "cone", "top_grasp": "disk"}
-
-
-def _dims(space: TaskSpace, q: tuple[float, ...]) -> tuple[float, float, float]:
-    if space.template == "side_grasp":
-        return (q[0], space.fixed["height"], 0.0)
-    if space.template == "handle_grasp":
-        return (q[0], q[1], 0.0)
-    return (q[0], space.fixed["thickness"], 0.0)
-
-
-def _quat(m: np.ndarray) -> tuple[float, float, float, float]:
-    return quat_of_rotation(m)
-
-
 def object_body(obj: SceneObject) -> Shape:
     """The object's body as a shape (cylinder or box), for collision checks."""
     x, y, z = obj.position
     if obj.kind == "box":
         ex, ey, ez = obj.half_extents
-        return Shape("box", (x, y, z + ez), _quat(yaw_matrix(obj.yaw)), (ex, ey, ez))
+        return Shape("box", (x, y, z + ez), quat_of_rotation(yaw_matrix(obj.yaw)), (ex, ey, ez))
     return Shape("cylinder", (x, y, z + obj.height / 2), IDENTITY, (obj.radius, obj.height, 0.0))
 
 
@@ -101,22 +84,25 @@ def _pose_quat(template: str, obj: SceneObject) -> tuple[float, float, float, fl
     if template == "handle_grasp":
         return quat_of_approach((np.cos(obj.yaw), np.sin(obj.yaw), 0.0))
     if template == "drawer_pull":
-        return _quat(yaw_matrix(obj.yaw))
+        return quat_of_rotation(yaw_matrix(obj.yaw))
     return IDENTITY
 
 
-def _build_shape(template: str, obj: SceneObject, q: np.ndarray, fixed: dict,
-                 pose_quat: tuple) -> Shape:
+def _build_shape(template: str, obj: SceneObject, q, fixed: dict, pose_quat: tuple,
+                 center: tuple | None = None) -> Shape:
+    """The template's shape for parameters q; ``center``, when given, is its centre
+    (which q does not move, but for the drawer)."""
     x, y, z = obj.position
     if template == "side_grasp":
         h = fixed["height"]
-        return Shape("cylinder", (x, y, z + h / 2), pose_quat, (float(q[0]), h, 0.0))
+        return Shape("cylinder", center or (x, y, z + h / 2), pose_quat, (float(q[0]), h, 0.0))
     if template == "handle_grasp":
-        g, _ = handle_point(obj, fixed["handle_offset"])
-        return Shape("cone", tuple(g), pose_quat, (float(q[0]), float(q[1]), 0.0))
+        if center is None:
+            center = tuple(handle_point(obj, fixed["handle_offset"])[0])
+        return Shape("cone", center, pose_quat, (float(q[0]), float(q[1]), 0.0))
     if template == "top_grasp":
-        zc = z + obj.body_height + fixed["offset"]
-        return Shape("disk", (x, y, zc), pose_quat, (float(q[0]), fixed["thickness"], 0.0))
+        center = center or (x, y, z + obj.body_height + fixed["offset"])
+        return Shape("disk", center, pose_quat, (float(q[0]), fixed["thickness"], 0.0))
     # drawer_pull: the local -x face stays put, the far face moves with the depth.
     ex, _, ez = obj.half_extents
     depth = float(q[0])

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from geometry_precompute import DEFAULTS, precompute, random_scene
-from geometry_precompute.clusters import clusters_from_pairs, intersecting_pairs
+from geometry_precompute.clusters import clusters_from_pairs
 from geometry_precompute.intersect import SpaceSet
 from geometry_precompute.shapes import Shape
 from geometry_precompute.shrinking import shrink
@@ -30,7 +30,7 @@ def test_touching_does_not_count():
 def test_clusters_are_components_in_task_order():
     xs = [0.0, 0.3, 0.6, 2.0, 5.0, 5.3]  # chain 0-1-2, single 3, pair 4-5
     shapes = [Shape("cylinder", (x, 0, 0), IDENT, (0.2, 0.15, 0)) for x in xs]
-    pairs = intersecting_pairs(SpaceSet(shapes))
+    pairs = SpaceSet(shapes).intersecting_pairs()
     assert pairs == [(0, 1), (1, 2), (4, 5)]
     assert clusters_from_pairs(6, pairs) == [[0, 1, 2], [3], [4, 5]]
 
@@ -44,7 +44,7 @@ def _spaces(seed, kind):
        st.sampled_from([0.05, 0.1, 0.3]))
 def test_shrinking_properties(seed, kind, sigma):
     _, spaces = _spaces(seed, kind)
-    initial_pairs = intersecting_pairs(SpaceSet([s.shape() for s in spaces]))
+    initial_pairs = SpaceSet([s.shape() for s in spaces]).intersecting_pairs()
     touched = {i for p in initial_pairs for i in p}
     history: list = []
     res = shrink(spaces, sigma, 1000, history=history)
@@ -87,7 +87,7 @@ def test_max_iter_caps_passes():
 
 def test_sigma_one_sends_every_overlapping_space_to_its_minimum():
     _, spaces = _spaces(11, "gaussian")
-    touched = {i for p in intersecting_pairs(SpaceSet([s.shape() for s in spaces])) for i in p}
+    touched = {i for p in SpaceSet([s.shape() for s in spaces]).intersecting_pairs() for i in p}
     assert touched
     res = shrink(spaces, 1.0)
     assert res.iterations == 1
