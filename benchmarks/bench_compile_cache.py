@@ -40,9 +40,9 @@ from bench_rollouts import _load
 from sweeps import compile_cache
 import shacc_jax
 compile_cache.enable()
-scenes = _load({bake!r}, {n})
+inputs = _load({bake!r}, {n})
 t = time.perf_counter()
-ev = shacc_jax.evaluate_on_devices(scenes)
+ev = shacc_jax.evaluate_on_devices(*inputs)
 print("evaluate", round(time.perf_counter() - t, 3), jax.devices()[0].device_kind,
       hashlib.sha256(np.asarray(ev.rollouts.outcome).tobytes()).hexdigest()[:16])
 """

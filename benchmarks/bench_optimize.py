@@ -45,7 +45,7 @@ def _load(path: str, n: int | None = None) -> SimpleNamespace:
     data = dict(np.load(path))
     if n is not None:
         data = {k: v[:n] for k, v in data.items()}
-    return SimpleNamespace(**data, meta={})
+    return SimpleNamespace(**data, labels={})
 
 
 def _search(baked, per_call):

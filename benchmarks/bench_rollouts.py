@@ -8,9 +8,10 @@ Two steps, so the accelerator machine needs only JAX and ``shacc_jax``:
     python benchmarks/bench_rollouts.py run --bake bake.npz --sizes 1000 10000
 
 ``run`` reports the compile time apart from the run time (median of --repeat timed
-calls after a warm-up), rollouts per second, and the device. ``reference`` times
-the plain NumPy Automaton of tests/ on a sample of the same rollouts, for the ratio.
-Nothing here asserts a speed.
+calls after a warm-up), rollouts per second, and the device. ``points`` times a sweep
+over rollout settings (v_max) both ways: one call with a points axis on Params, and a
+loop of one call per point. ``reference`` times the plain NumPy Automaton of tests/ on
+a sample of the same rollouts, for the ratio. Nothing here asserts a speed.
 """
 
 from __future__ import annotations
@@ -25,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-# The bake's fields as the JAX side reads them (importing geometry_precompute here would
-# need the mesh libraries, which the GPU machine does not have).
-from shacc_jax.types import Scenes
+# The bake's fields as the JAX side reads them (the schema imports no mesh library, which
+# the GPU machine does not have).
+from geometry_precompute import schema
 
-FIELDS = Scenes._fields
+FIELDS = schema.names(schema.GEOMETRY + schema.PARAMS)
 
 
 def _precompute_one(seed: int):
@@ -56,10 +57,13 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
-def _load(path: str, n: int, collision: bool = False):
-    import jax.numpy as jnp
+def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=None,
+          chunk: int = 16):
+    """(geometry, params, layout) of the first n scenes of a bake file (repeated if it
+    holds fewer)."""
+    from types import SimpleNamespace
 
-    from shacc_jax.types import Scenes
+    import shacc_jax
 
     data = np.load(path)
     missing = [k for k in FIELDS if k not in data]
@@ -72,17 +76,17 @@ def _load(path: str, n: int, collision: bool = False):
         a = data[k]
         if k == "collision":
             a = np.full_like(a, collision)
-        a = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
-        arrays[k] = jnp.asarray(a)
-    return Scenes(**arrays)
+        arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
+    return shacc_jax.inputs(SimpleNamespace(**arrays), modes, lanes_per_block=block,
+                            samples_per_block=chunk)
 
 
-def _regrid(scenes, ny: int, nz: int):
+def _regrid(geometry, ny: int, nz: int):
     """The same scenes with an ny x nz start grid over the baked grid's y and z range
     (seeded random orientations), for start-grid scaling."""
     import jax.numpy as jnp
 
-    st = np.asarray(scenes.starts)
+    st = np.asarray(geometry.starts)
     S = st.shape[0]
     y = np.linspace(st[:, :, 1].min(1), st[:, :, 1].max(1), ny, axis=1)  # (S, ny)
     z = np.linspace(st[:, :, 2].min(1), st[:, :, 2].max(1), nz, axis=1)
@@ -93,14 +97,15 @@ def _regrid(scenes, ny: int, nz: int):
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     quats = np.broadcast_to(q, (S, ny * nz, 4))
     new = np.concatenate([np.stack([xx, yy, zz], -1), quats], -1).astype(st.dtype)
-    return scenes._replace(starts=jnp.asarray(new))
+    return geometry._replace(starts=jnp.asarray(new))
 
 
 def cmd_run(args) -> None:
+    import dataclasses
+
     import jax
 
     import shacc_jax
-    from shacc_jax.evaluation import _evaluate, static_layout
 
     modes = tuple(args.modes)
     rows = []
@@ -108,39 +113,77 @@ def cmd_run(args) -> None:
     if args.devices:
         return _run_devices(args, modes)
     for n in args.sizes:
-        scenes = _load(args.bake, n, args.collision)
+        geometry, params, layout = _load(args.bake, n, args.collision, modes, args.block,
+                                         args.chunk)
         if args.grid:
-            scenes = _regrid(scenes, *args.grid)
-        S, T = scenes.task_mask.shape
-        N = scenes.starts.shape[1]
+            geometry = _regrid(geometry, *args.grid)
+            layout = dataclasses.replace(layout, n_starts=geometry.starts.shape[1])
+        if args.meta:  # "general" on yaw-only scenes: the Markley path
+            layout = dataclasses.replace(layout, meta_formula=args.meta)
+        S, T = geometry.task_mask.shape
+        N = geometry.starts.shape[1]
         rollouts = S * T * N * len(modes)
         t0 = time.perf_counter()
-        from shacc_jax.evaluation import default_block_size
-        block = args.block or default_block_size()
-        layout = static_layout(scenes)
-        if args.meta:
-            layout["meta"] = args.meta  # "general" on yaw-only scenes: the Markley path
-        lowered = _evaluate.lower(scenes, modes, block, args.chunk, **layout)
-        compiled = lowered.compile()
+        compiled = shacc_jax.evaluate.lower(geometry, params, layout).compile()
         t1 = time.perf_counter()
-        jax.block_until_ready(compiled(scenes))  # warm-up
+        jax.block_until_ready(compiled(geometry, params))  # warm-up
         times = []
         for _ in range(args.repeat):
             t = time.perf_counter()
-            jax.block_until_ready(compiled(scenes))
+            jax.block_until_ready(compiled(geometry, params))
             times.append(time.perf_counter() - t)
         med = statistics.median(times)
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
-               "starts": N, "modes": len(modes), "rollouts": rollouts, "block": block,
-               "chunk": args.chunk, "collision": args.collision,
-               "meta": layout["meta"],
+               "starts": N, "modes": len(modes), "rollouts": rollouts,
+               "block": layout.lanes_per_block or schema.lanes_per_block_default(
+                   jax.default_backend()),
+               "chunk": layout.samples_per_block, "collision": args.collision,
+               "meta": layout.meta_formula,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
         print(json.dumps(row), flush=True)
-    _ = shacc_jax
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def cmd_points(args) -> None:
+    """A sweep of P v_max values over one geometry: one call with Params (P, S), against
+    P calls with Params (S,) (the loop a sweep ran before Params had a points axis)."""
+    import jax
+
+    import shacc_jax
+
+    geometry, params, layout = _load(args.bake, args.scenes)
+    scale = np.linspace(0.5, 1.5, args.points).astype(np.asarray(params.v_max).dtype)
+    stacked = jax.tree.map(lambda a: jax.numpy.stack([a] * args.points), params)
+    stacked = stacked._replace(v_max=stacked.v_max * scale[:, None])
+    singles = [jax.tree.map(lambda a, i=i: a[i], stacked) for i in range(args.points)]
+    t0 = time.perf_counter()
+    mapped = shacc_jax.evaluate.lower(geometry, stacked, layout).compile()
+    one = shacc_jax.evaluate.lower(geometry, singles[0], layout).compile()
+    t1 = time.perf_counter()
+
+    def timed(fn):
+        jax.block_until_ready(fn())
+        times = []
+        for _ in range(args.repeat):
+            t = time.perf_counter()
+            jax.block_until_ready(fn())
+            times.append(time.perf_counter() - t)
+        return statistics.median(times)
+
+    t_mapped = timed(lambda: mapped(geometry, stacked))
+    t_loop = timed(lambda: [one(geometry, p) for p in singles])
+    a = mapped(geometry, stacked).rollouts.outcome
+    b = np.stack([np.asarray(one(geometry, p).rollouts.outcome) for p in singles])
+    S, T = geometry.task_mask.shape
+    rollouts = args.points * S * T * geometry.starts.shape[1] * len(layout.modes)
+    print(json.dumps({"device": str(jax.devices()[0]), "points": args.points, "scenes": S,
+                      "rollouts": rollouts, "compile_s_both": t1 - t0,
+                      "mapped_s_median": t_mapped, "loop_s_median": t_loop,
+                      "speedup": t_loop / t_mapped,
+                      "same_outcomes": bool(np.array_equal(np.asarray(a), b))}), flush=True)
 
 
 def _run_devices(args, modes) -> None:
@@ -150,21 +193,20 @@ def _run_devices(args, modes) -> None:
     import jax
 
     import shacc_jax
-    from shacc_jax.evaluation import evaluate_sharded
 
-    run = evaluate_sharded if args.sharded else shacc_jax.evaluate_on_devices
+    run = shacc_jax.evaluate_sharded if args.sharded else shacc_jax.evaluate_on_devices
 
     for n in args.sizes:
-        scenes = _load(args.bake, n)
-        S, T = scenes.task_mask.shape
-        rollouts = S * T * scenes.starts.shape[1] * len(modes)
+        geometry, params, layout = _load(args.bake, n, modes=modes)
+        S, T = geometry.task_mask.shape
+        rollouts = S * T * geometry.starts.shape[1] * len(modes)
         for k in args.devices:
             devs = jax.local_devices()[:k]
-            run(scenes, modes, devs)  # compile and warm up
+            run(geometry, params, layout, devs)  # compile and warm up
             times = []
             for _ in range(args.repeat):
                 t = time.perf_counter()
-                run(scenes, modes, devs)
+                run(geometry, params, layout, devs)
                 times.append(time.perf_counter() - t)
             med = statistics.median(times)
             print(json.dumps({"devices": [str(d) for d in devs], "sharded": args.sharded,
@@ -220,6 +262,12 @@ def main() -> None:
                    help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
+    q = sub.add_parser("points")
+    q.add_argument("--bake", required=True)
+    q.add_argument("--scenes", type=int, default=1000)
+    q.add_argument("--points", type=int, default=5)
+    q.add_argument("--repeat", type=int, default=3)
+    q.set_defaults(func=cmd_points)
     f = sub.add_parser("reference")
     f.add_argument("--scenes", type=int, default=20)
     f.add_argument("--samples", type=int, default=300)

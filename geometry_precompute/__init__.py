@@ -7,8 +7,9 @@ from pathlib import Path
 from .bake import BakedScenes, bake
 from .errors import InputError
 from .generate import random_scene
+from .loading import load_scene, scene_from_dict
 from .precompute import PrecomputeResult, precompute
-from .scene import Scene, load_scene, save_scene, scene_from_dict
+from .scene import Scene, save_scene
 from .settings import DEFAULTS, SPECS, Settings
 
 

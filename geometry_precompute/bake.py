@@ -6,137 +6,44 @@ reads these arrays by name and nothing else. S scenes are padded to T tasks
 ``task_mask = False``, harmless finite geometry, and can never activate or
 weigh in an average on the JAX side.
 
-Fields (float64 here; the JAX side casts to its working precision):
-
-==================  ==========  ===============================================
-field               shape       meaning
-==================  ==========  ===============================================
-task_mask           (S, T)      True for a real task
-kind                (S, T)      shape kind: 0 cylinder, 1 disk, 2 cone, 3 box
-center_init         (S, T, 3)   initial space's centre (cone: apex), world
-quat_init           (S, T, 4)   initial space's rotation (w, x, y, z)
-dims_init           (S, T, 3)   initial dims (cylinder/disk r, h, 0; cone L,
-                                alpha, 0; box half extents)
-center_opt ...      ...         the same for the shrunk (optimised) space
-cluster             (S, T)      meta-skill cluster label (0, 1, ... in task
-                                order) for tasks in clusters of >= 2, else -1
-orient_kind         (S, T)      0 fixed, 1 point-to-axis
-orient_quat         (S, T, 4)   fixed orientation; for point-to-axis the
-                                orientation used on the axis itself
-orient_axis         (S, T, 2)   (x, y) of the vertical axis (point-to-axis)
-starts              (S, N, 7)   start poses [x, y, z, qw, qx, qy, qz]
-obj_mask            (S, O)      True for a real object (O: most objects)
-obj_kind            (S, O)      0 cylinder, 1 box
-obj_center          (S, O, 3)   the object body's centre, world
-obj_quat            (S, O, 4)   its rotation (w, x, y, z)
-obj_size            (S, O, 3)   MuJoCo geom size: cylinder [r, half height, 0],
-                                box half extents
-dt, v_max,          (S,)        rollout settings, one value per scene, so a
-omega_max,                      sweep can vary them without recompiling
-activation_tol,
-max_steps,
-ambiguity_nearest,
-collision,                      True for collision = "mjx"
-gripper_finger_length,          the ``gripper.*`` settings
-gripper_finger_radius,
-gripper_opening,
-gripper_palm_radius
-==================  ==========  ===============================================
+The fields, their shapes and meanings, and the integer codes in them are the
+schema's (``schema.py``: GEOMETRY, PARAMS, SEARCH); floats are float64 here, the
+JAX side casts them to its working precision. ``BakedScenes.layout`` computes the
+batch's static :class:`~geometry_precompute.schema.Layout` in NumPy.
 
 The ``optimized`` mode's search (SPEC section 17) builds spaces for any parameter
 vector on the accelerator. Every template's space is affine in its shrinkable
-parameters q (P = 2 slots: the most any template has), so the bake carries that map:
+parameters q (P = 2 slots: the most any template has), so the bake carries that
+map (``center_dq``, ``dims_dq``) and checks it at each template's midpoint.
 
-==================  ==========  ===============================================
-q_mask              (S, T, P)   True for a real parameter of a real task
-q_min, q_init,      (S, T, P)   its bounds and Shrinking's value (0 where masked)
-q_shrunk
-center_dq           (S, T, 3, P)  d centre / d q: centre(q) = center_init +
-                                center_dq (q - q_init)
-dims_dq             (S, T, 3, P)  d dims / d q, the same way
-opt_starts          (S, No, 7)  the search's own start poses (``optimize_starts``,
-                                ``optimize_seed``; padded to the batch's largest)
-opt_start_mask      (S, No)     True for a real search start
-optimize_seed,      (S,)        the search's settings; population and
-optimize_population,            generations must agree across a batch (they
-optimize_generations            are static sizes of its program)
-==================  ==========  ===============================================
-
-Metadata for people (names, task ids, C values) rides along in ``meta`` and
-is never passed to JAX.
+Labels for people (names, task ids, C values) ride along in ``labels`` and are never
+passed to JAX.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import field, make_dataclass
 
 import numpy as np
 
+from . import schema
+from .bodies import object_body
 from .errors import InputError
 from .precompute import PrecomputeResult
-from .shapes import KIND_CODES
+from .schema import KIND_CODES, MAX_PARAMS
 from .starts import optimize_start_poses, start_poses
-from .templates import TaskSpace, object_body
+from .templates import TaskSpace
 
-ARRAY_FIELDS = ("task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt",
-                "quat_opt", "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis",
-                "starts", "obj_mask", "obj_kind", "obj_center", "obj_quat", "obj_size")
-PARAM_FIELDS = ("dt", "v_max", "omega_max", "activation_tol", "max_steps", "ambiguity_nearest",
-                "collision", "gripper_finger_length", "gripper_finger_radius", "gripper_opening",
-                "gripper_palm_radius")
-SEARCH_FIELDS = ("q_mask", "q_min", "q_init", "q_shrunk", "center_dq", "dims_dq", "opt_starts",
-                 "opt_start_mask", "optimize_seed", "optimize_population",
-                 "optimize_generations")
-MAX_PARAMS = 2  # shrinkable parameters of one template, at most (handle_grasp: L, alpha)
-GRIPPER_FIELDS = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",
-                  "gripper_palm_radius")
+GEOMETRY_FIELDS = schema.names(schema.GEOMETRY)
+PARAM_FIELDS = schema.names(schema.PARAMS)
+SEARCH_FIELDS = schema.names(schema.SEARCH)
 _PAD_DIMS = (0.01, 0.01, 0.01)
 
 
-@dataclass(frozen=True)
-class BakedScenes:
-    task_mask: np.ndarray
-    kind: np.ndarray
-    center_init: np.ndarray
-    quat_init: np.ndarray
-    dims_init: np.ndarray
-    center_opt: np.ndarray
-    quat_opt: np.ndarray
-    dims_opt: np.ndarray
-    cluster: np.ndarray
-    orient_kind: np.ndarray
-    orient_quat: np.ndarray
-    orient_axis: np.ndarray
-    starts: np.ndarray
-    obj_mask: np.ndarray
-    obj_kind: np.ndarray
-    obj_center: np.ndarray
-    obj_quat: np.ndarray
-    obj_size: np.ndarray
-    dt: np.ndarray
-    v_max: np.ndarray
-    omega_max: np.ndarray
-    activation_tol: np.ndarray
-    max_steps: np.ndarray
-    ambiguity_nearest: np.ndarray
-    collision: np.ndarray
-    gripper_finger_length: np.ndarray
-    gripper_finger_radius: np.ndarray
-    gripper_opening: np.ndarray
-    gripper_palm_radius: np.ndarray
-    q_mask: np.ndarray
-    q_min: np.ndarray
-    q_init: np.ndarray
-    q_shrunk: np.ndarray
-    center_dq: np.ndarray
-    dims_dq: np.ndarray
-    opt_starts: np.ndarray
-    opt_start_mask: np.ndarray
-    optimize_seed: np.ndarray
-    optimize_population: np.ndarray
-    optimize_generations: np.ndarray
-    meta: dict = field(default_factory=dict, compare=False)
+class _Batch:
+    """What every bake offers beside its arrays (the dataclass below has one field
+    per schema field, and ``labels``)."""
 
     @property
     def n_scenes(self) -> int:
@@ -151,7 +58,55 @@ class BakedScenes:
         return self.starts.shape[1]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in ARRAY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS}
+        """Every schema field by name (for ``np.savez``; ``BakedScenes(**arrays)`` reads
+        them back)."""
+        return {k: getattr(self, k) for k in GEOMETRY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS}
+
+    def layout(self, modes=schema.MODES, lanes_per_block: int | None = None,
+               samples_per_block: int = 16) -> schema.Layout:
+        """The batch's static layout, read off the arrays once, in NumPy."""
+        return batch_layout(self, modes, lanes_per_block, samples_per_block)
+
+
+def batch_layout(arrays, modes=schema.MODES, lanes_per_block: int | None = None,
+                 samples_per_block: int = 16) -> schema.Layout:
+    """:class:`~geometry_precompute.schema.Layout` of any object with the schema's
+    GEOMETRY and PARAMS fields (NumPy arrays; PARAMS may carry a leading axis of sweep
+    points)."""
+    yaw = np.asarray(arrays.yaw_meta)
+    collide = bool(np.asarray(arrays.collision).any())
+    boxes = collide and bool((np.asarray(arrays.obj_mask)
+                              & (np.asarray(arrays.obj_kind) == schema.BOX)).any())
+    return schema.Layout(
+        n_tasks=arrays.task_mask.shape[-1], n_starts=arrays.starts.shape[-2],
+        n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
+        meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
+        collision_checks=collide, box_objects=boxes, lanes_per_block=lanes_per_block,
+        samples_per_block=samples_per_block)
+
+
+BakedScenes = make_dataclass(
+    "BakedScenes",
+    [(k, np.ndarray) for k in GEOMETRY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS]
+    + [("labels", dict, field(default_factory=dict, compare=False))],
+    bases=(_Batch,), frozen=True)
+BakedScenes.__module__ = __name__
+BakedScenes.__doc__ = """A bake: one NumPy array per schema field (GEOMETRY, PARAMS, SEARCH),
+leading axis S, and ``labels`` for people (names, task ids, C values)."""
+
+
+def is_horizontal_approach(q) -> bool:
+    """Whether orientation ``q`` is a horizontal approach frame: q = (cos psi/2, 0, 0,
+    sin psi/2) * q_forward, i.e. the x and y parts of q * conj(q_forward) vanish to 64
+    machine epsilons (float64). The JAX half's ``orientation.fixed_direction`` applies
+    the same test in its working precision; the layout's decision is this one."""
+    w, x, y, z = (float(v) for v in q)
+    fw, fx, fy, fz = 0.5, -0.5, -0.5, -0.5  # conj(q_forward), q_forward = (1, 1, 1, 1) / 2
+    rx = w * fx + x * fw + y * fz - z * fy
+    ry = w * fy - x * fz + y * fw + z * fx
+    rw = w * fw - x * fx - y * fy - z * fz
+    rz = w * fz + x * fy - y * fx + z * fw
+    return abs(rx) + abs(ry) <= 64 * np.finfo(np.float64).eps and rw * rw + rz * rz > 0.5
 
 
 def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:
@@ -258,6 +213,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         "orient_kind": np.zeros((S, T), np.int32),
         "orient_quat": np.tile([1.0, 0.0, 0.0, 0.0], (S, T, 1)),
         "orient_axis": np.zeros((S, T, 2)),
+        "yaw_meta": np.zeros(S, bool),
     }
     for which in ("init", "opt"):
         out[f"center_{which}"] = np.zeros((S, T, 3))
@@ -280,13 +236,13 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
             out["obj_mask"][si, oi] = True
             out["obj_center"][si, oi] = body.center
             out["obj_quat"][si, oi] = body.quat
+            out["obj_kind"][si, oi] = KIND_CODES[body.kind]
             if body.kind == "box":
-                out["obj_kind"][si, oi] = 1
                 out["obj_size"][si, oi] = body.dims
             else:
                 out["obj_size"][si, oi] = (body.dims[0], body.dims[1] / 2, 0.0)
         params["collision"][si] = s["collision"] == "mjx"
-        for k in GRIPPER_FIELDS:
+        for k in schema.GRIPPER:
             params[k][si] = s[k.replace("gripper_", "gripper.")]
         for ti, space in enumerate(r.spaces):
             out["task_mask"][si, ti] = True
@@ -296,21 +252,23 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
                 out[f"quat_{which}"][si, ti] = shape.quat
                 out[f"dims_{which}"][si, ti] = shape.dims
             o = space.orientation
-            out["orient_kind"][si, ti] = 1 if o.kind == "point_to_axis" else 0
+            out["orient_kind"][si, ti] = schema.ORIENT_KINDS.index(o.kind)
             out["orient_quat"][si, ti] = o.quat
             out["orient_axis"][si, ti] = o.axis_xy
         for label, members in enumerate(r.meta_clusters()):
             out["cluster"][si, members] = label
+        out["yaw_meta"][si] = all(is_horizontal_approach(out["orient_quat"][si, t])
+                                  for members in r.meta_clusters() for t in members)
         for k in ("dt", "v_max", "omega_max"):
             params[k][si] = s[k]
         params["activation_tol"][si] = s["activation_tol"]
         params["max_steps"][si] = s["max_steps"]
         params["ambiguity_nearest"][si] = s["ambiguity"] == "nearest"
-    meta = {
+    labels = {
         "names": [r.scene.name for r in results],
         "task_ids": [r.task_ids for r in results],
         "C_init": np.array([r.C_init for r in results]),
         "C_final": np.array([r.C_final for r in results]),
     }
-    return BakedScenes(starts=starts_arr, meta=meta, **out, **params,
+    return BakedScenes(starts=starts_arr, labels=labels, **out, **params,
                        **_search_fields(results, T))

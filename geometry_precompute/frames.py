@@ -11,6 +11,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
+
 
 def frame_from_approach(a) -> np.ndarray:
     """SPEC section 2: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;

@@ -16,11 +16,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import coal
 import numpy as np
 
-from .errors import InputError
-from .scene import INTERPENETRATION_TOL, Scene
 from .shapes import Shape, is_upright
 
 INTERSECT_TOL = 1e-9
@@ -28,7 +25,16 @@ INTERSECT_TOL = 1e-9
 _FLIP_X = np.diag([1.0, -1.0, -1.0])
 
 
+def _coal():
+    """coal, imported on first use: parsing scenes and reading the bake's schema (the
+    JAX half) import this package but never need it."""
+    import coal
+
+    return coal
+
+
 def _coal_geometry(shape: Shape):
+    coal = _coal()
     a, b, c = shape.dims
     if shape.kind in ("cylinder", "disk"):
         return coal.Cylinder(a, b)
@@ -56,7 +62,7 @@ def _coal_translation(shape: Shape, axis: tuple[float, float, float]) -> np.ndar
     return np.array((x, y, z), dtype=np.float64)
 
 
-def _set_transform(tf: coal.Transform3s, shape: Shape) -> None:
+def _set_transform(tf, shape: Shape) -> None:
     rot = shape.rotation
     tf.setRotation(rot @ _FLIP_X if shape.kind == "cone" else rot)
     tf.setTranslation(_coal_translation(shape, tuple(rot[:, 2].tolist())))
@@ -84,6 +90,8 @@ class SpaceSet:
         boxes = [s.aabb() for s in self.shapes]
         self._lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
         self._hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
+        coal = _coal()
+        self._distance = coal.distance
         self._req = coal.DistanceRequest()
         self._req.enable_signed_distance = True
         self._res = coal.DistanceResult()
@@ -99,7 +107,7 @@ class SpaceSet:
         if self._stale[i]:
             s = self.shapes[i]
             if self.geoms[i] is None:
-                self.geoms[i], self.tfs[i] = _coal_geometry(s), coal.Transform3s()
+                self.geoms[i], self.tfs[i] = _coal_geometry(s), _coal().Transform3s()
                 _set_transform(self.tfs[i], s)
                 self._quat[i] = s.quat
             else:
@@ -125,7 +133,7 @@ class SpaceSet:
         gi, ti = self._coal(i)
         gj, tj = self._coal(j)
         self._res.clear()
-        return float(coal.distance(gi, ti, gj, tj, self._req, self._res))
+        return float(self._distance(gi, ti, gj, tj, self._req, self._res))
 
     def intersects(self, i: int, j: int, tol: float = INTERSECT_TOL) -> bool:
         if self.upright[i] and self.upright[j]:
@@ -134,16 +142,3 @@ class SpaceSet:
 
     def intersecting_pairs(self) -> list[tuple[int, int]]:
         return [(i, j) for i, j in self.candidate_pairs() if self.intersects(i, j)]
-
-
-def check_bodies_apart(scene: Scene) -> None:
-    """SPEC section 13: objects must not interpenetrate (coal distance below -1e-6 m)."""
-    from .templates import object_body
-
-    bodies = SpaceSet([object_body(o) for o in scene.objects])
-    for i, j in bodies.candidate_pairs():
-        if bodies.intersects(i, j, INTERPENETRATION_TOL):
-            d = bodies.signed_distance(i, j)
-            raise InputError(scene.source, f"objects[{scene.objects[j].id}].position",
-                             f"interpenetrates object {scene.objects[i].id!r} "
-                             f"(signed distance {d:.4g} m < -1e-6 m)")

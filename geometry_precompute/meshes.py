@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 
-import manifold3d as m3
 import numpy as np
 
 from .shapes import Shape
@@ -29,7 +28,11 @@ def _pose_matrix(shape: Shape) -> np.ndarray:
     return m
 
 
-def shape_manifold(shape: Shape, sections: int) -> m3.Manifold:
+def shape_manifold(shape: Shape, sections: int):
+    """The shape as a ``manifold3d.Manifold`` (imported here, on first use: importing
+    the package, as the JAX half does for the bake's schema, must not load it)."""
+    import manifold3d as m3
+
     a, b, c = shape.dims
     k = area_preserving_scale(sections)
     if shape.kind in ("cylinder", "disk"):
@@ -41,7 +44,7 @@ def shape_manifold(shape: Shape, sections: int) -> m3.Manifold:
     return local.transform(_pose_matrix(shape))
 
 
-def manifold_to_trimesh(m: m3.Manifold):
+def manifold_to_trimesh(m):
     """The manifold as a ``trimesh.Trimesh`` (trimesh is imported here, on first use:
     the precompute itself needs only manifold3d)."""
     import trimesh

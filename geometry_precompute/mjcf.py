@@ -13,10 +13,10 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from .bodies import object_body
 from .meshes import shape_trimesh
 from .precompute import PrecomputeResult
 from .shapes import Shape
-from .templates import object_body
 
 INIT_RGBA = "0.9 0.1 0.1 0.22"
 OPT_RGBA = "0.1 0.3 0.95 0.35"

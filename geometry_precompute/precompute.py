@@ -14,15 +14,16 @@ from typing import Any
 
 import numpy as np
 
+from .bodies import check_bodies_apart
 from .clusters import clusters_from_pairs
 from .clutteredness import clutteredness_of_sets
 from .errors import InputError
 from .intersect import SpaceSet
-from .metrics import entropic_clutteredness, mean_distance
 from .scene import Scene
 from .settings import Settings
 from .shapes import Shape
 from .shrinking import shrink
+from .spread import entropic_clutteredness, mean_distance
 from .templates import TaskSpace, resolve_tasks
 
 # Part of every precompute cache key: raised when the same scene and settings would
@@ -81,6 +82,7 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
                          f"setting = value, got {type(settings).__name__}")
     t0 = time.perf_counter()
     spaces = resolve_tasks(scene, s)
+    check_bodies_apart(scene)
     shapes_init = [sp.shape() for sp in spaces]
     sections = s["mesh_sections"]
     t1 = time.perf_counter()
@@ -110,6 +112,6 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
     h = entropic_clutteredness(positions, s["entropy_variant"])
     t6 = time.perf_counter()
     seconds = {"spaces": t1 - t0, "clusters": t2 - t1, "shrinking": t3 - t2,
-               "C_init_and_final": t4 - t3, "metrics": t6 - t4, "total": t6 - t0}
+               "C_init_and_final": t4 - t3, "d_and_h": t6 - t4, "total": t6 - t0}
     return PrecomputeResult(scene, s, spaces, shapes_init, shapes_opt, q_opt, c_init, c_final,
                             clusters, iterations, still, d, h, seconds)

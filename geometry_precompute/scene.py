@@ -1,12 +1,13 @@
 """The scene model and its TOML files (SPEC sections 3, 13 and 16).
 
-:func:`load_scene` reads and validates a file; :func:`scene_from_dict`
-validates a parsed table (``source`` names where it came from);
-:func:`save_scene` writes the same format back. Every rule of SPEC section 13
-raises :class:`~geometry_precompute.errors.InputError` naming the file, the
-field and the rule. Object-dependent rules (template fits its object, bounds
-min <= init, bodies apart) are checked here too, through the templates, so a
-loaded scene is always one the precompute can run.
+:func:`parse_scene` validates a parsed table (``source`` names where it came
+from): names, types, ranges and references; :func:`save_scene` writes the same
+format back. Every rule of SPEC section 13 raises
+:class:`~geometry_precompute.errors.InputError` naming the file, the field and
+the rule. The rules that need the templates (a template fits its object, bounds
+min <= init) are checked above this module (``loading``: ``load_scene``,
+``scene_from_dict``); that objects do not interpenetrate needs coal and is checked
+where the geometry is built (``precompute``).
 
 One key beyond SPEC section 3 is accepted: an optional top-level
 ``description`` (one line of text), used by the shipped scenes.
@@ -21,7 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import tomli_w
 
 from .errors import InputError
@@ -219,9 +219,9 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
     return Task(tid, obj_id, template, bounds, fixed)
 
 
-def scene_from_dict(data: Mapping[str, Any], source: str = "<scene>",
-                    check_geometry: bool = True) -> Scene:
-    """Validate a parsed scene table (SPEC sections 3 and 13) and build a Scene."""
+def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
+    """Validate a parsed scene table's names, types, ranges and references (SPEC
+    sections 3 and 13) and build a Scene."""
     src = str(source)
     _check_keys(data, _TOP_KEYS, {"name"}, src, "")
     name = _string(data["name"], src, "name")
@@ -253,56 +253,11 @@ def scene_from_dict(data: Mapping[str, Any], source: str = "<scene>",
     DEFAULTS.with_overrides(settings_raw, src, "settings.")  # validates every key and value
     scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), settings_raw,
                   description, src)
-    if check_geometry:
-        from .intersect import check_bodies_apart
-        from .templates import resolve_tasks  # templates need the scene model: import late
-
-        spaces = resolve_tasks(scene, scene.settings())
-        check_bodies_apart(scene)
-        _warn_legal_oddities(scene, spaces)
     return scene
 
 
 class SceneWarning(UserWarning):
     """Legal but probably unintended scene content (shown once per scene and message)."""
-
-
-def _warn_legal_oddities(scene: Scene, spaces) -> None:
-    """Two things a scene may hold that are legal but rarely meant (SPEC is silent):
-    identical tasks on one object, whose spaces coincide so that every rollout towards
-    either is ambiguous; and a handle grasp point inside another object's body."""
-    import warnings
-
-    from .templates import object_body
-
-    seen: dict[tuple, str] = {}
-    for t in scene.tasks:
-        key = (t.object, t.template, tuple(sorted(t.bounds.items())),
-               tuple(sorted(t.fixed.items())))
-        if key in seen:
-            warnings.warn(SceneWarning(
-                f"{scene.source}: tasks[{t.id}]: same object, template, bounds and fixed "
-                f"dimensions as task {seen[key]!r}: their spaces coincide, so every rollout "
-                "towards either ends ambiguous"), stacklevel=3)
-        seen.setdefault(key, t.id)
-    for t, sp in zip(scene.tasks, spaces, strict=True):
-        if t.template != "handle_grasp":
-            continue
-        g = np.asarray(sp.shape().center)  # the cone's apex is the grasp point
-        for o in scene.objects:
-            if o.id != t.object and _inside(object_body(o), g):
-                warnings.warn(SceneWarning(
-                    f"{scene.source}: tasks[{t.id}]: the handle grasp point "
-                    f"{np.round(g, 4).tolist()} lies inside object {o.id!r}"), stacklevel=3)
-
-
-def _inside(body, p) -> bool:
-    """Whether point ``p`` lies inside a body shape (cylinder or box)."""
-    local = body.rotation.T @ (np.asarray(p) - np.asarray(body.center))
-    a, b, c = body.dims
-    if body.kind == "box":
-        return bool(np.all(np.abs(local) <= np.array([a, b, c])))
-    return bool(local[0] ** 2 + local[1] ** 2 <= a * a and abs(local[2]) <= b / 2)
 
 
 def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
@@ -326,10 +281,6 @@ def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
                          f"{what}") from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
-
-
-def load_scene(path: str | Path) -> Scene:
-    return scene_from_dict(read_toml(path, "a scene TOML file"), str(path))
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:

@@ -13,7 +13,7 @@ cone      (L, alpha, 0)        apex at the origin: 0 <= z <= L, rho <= z tan a
 box       (ex, ey, ez)         |x| <= ex, |y| <= ey, |z| <= ez (half extents)
 ========  ===================  ===============================================
 
-The integer codes in :data:`KIND_CODES` are the ones baked for the JAX half.
+The integer codes (:data:`KIND_CODES`) are the schema's, the ones baked for the JAX half.
 """
 
 from __future__ import annotations
@@ -24,8 +24,7 @@ from functools import cached_property
 
 import numpy as np
 
-KINDS = ("cylinder", "disk", "cone", "box")
-KIND_CODES = {name: i for i, name in enumerate(KINDS)}
+from .schema import KIND_CODES, KINDS  # noqa: F401  (the codes the bake writes)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ def start_orientations(settings: Settings) -> np.ndarray:
     return _orientations(ny * nz, settings["start_orientation"], settings["seed"])
 
 
-def _plane(scene: Scene, settings: Settings) -> tuple[float, tuple, tuple]:
+def start_plane(scene: Scene, settings: Settings) -> tuple[float, tuple, tuple]:
     """The start plane's x, its y range and its z range."""
     pos = np.array([o.position for o in scene.objects])
     x = pos[:, 0].min() - settings["start_plane_offset"]
@@ -59,7 +59,7 @@ def _plane(scene: Scene, settings: Settings) -> tuple[float, tuple, tuple]:
 
 def start_poses(scene: Scene, settings: Settings) -> np.ndarray:
     """(n_y * n_z, 7) rows of [x, y, z, qw, qx, qy, qz]."""
-    x, (y0, y1), (z0, z1) = _plane(scene, settings)
+    x, (y0, y1), (z0, z1) = start_plane(scene, settings)
     ny, nz = settings["start_grid"]
     yy, zz = np.meshgrid(_axis(y0, y1, ny), _axis(z0, z1, nz), indexing="ij")
     points = np.stack([np.full(yy.size, x), yy.ravel(), zz.ravel()], axis=1)
@@ -84,7 +84,7 @@ def _search_draws(n: int, orientation: str, seed: int) -> tuple[np.ndarray, ...]
 def optimize_start_poses(scene: Scene, settings: Settings) -> np.ndarray:
     """(optimize_starts, 7): the optimized mode's search starts (module docstring).
     Positions are lo + (hi - lo) u, as numpy's ``uniform`` computes them."""
-    x, (y0, y1), (z0, z1) = _plane(scene, settings)
+    x, (y0, y1), (z0, z1) = start_plane(scene, settings)
     uy, uz, quats = _search_draws(settings["optimize_starts"], settings["start_orientation"],
                                   settings["optimize_seed"])
     points = np.stack([np.full(len(uy), x), y0 + (y1 - y0) * uy, z0 + (z1 - z0) * uz], axis=1)

@@ -15,12 +15,10 @@ from functools import cached_property
 import numpy as np
 
 from .errors import InputError
-from .frames import quat_of_approach, quat_of_rotation, yaw_matrix
+from .frames import IDENTITY, quat_of_approach, quat_of_rotation, yaw_matrix
 from .scene import TEMPLATE_PARAMS, Scene, SceneObject, Task
 from .settings import Settings
 from .shapes import Shape
-
-IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -62,15 +60,6 @@ class TaskSpace:
             return None
         return _build_shape(self.template, self.obj, self.q_init, self.fixed,
                             self.pose_quat).center
-
-
-def object_body(obj: SceneObject) -> Shape:
-    """The object's body as a shape (cylinder or box), for collision checks."""
-    x, y, z = obj.position
-    if obj.kind == "box":
-        ex, ey, ez = obj.half_extents
-        return Shape("box", (x, y, z + ez), quat_of_rotation(yaw_matrix(obj.yaw)), (ex, ey, ez))
-    return Shape("cylinder", (x, y, z + obj.height / 2), IDENTITY, (obj.radius, obj.height, 0.0))
 
 
 def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:

@@ -54,30 +54,30 @@ class Path(NamedTuple):
     u: Float[Array, "3"]
     length: Float[Array, ""]  # D
     landing: Float[Array, ""]  # K, as a float (clamped to max_steps + 1)
-    step: Float[Array, ""]  # s = v_max dt
+    step_length: Float[Array, ""]  # s = v_max dt
 
 
 def straight_path(spaces: shapes.Prepared, target: Int[Array, ""], p0: Float[Array, "3"],
-                  step: Float[Array, ""], max_steps: Array) -> Path:
+                  step_length: Float[Array, ""], max_steps: Array) -> Path:
     c0 = shapes.prepared_project(jax.tree.map(lambda a: a[target], spaces), p0)
     diff = c0 - p0
     length = shapes._safe_norm(diff)
     u = jnp.where(length > 0, diff / jnp.where(length > 0, length, 1.0), 0.0)
-    landing = jnp.minimum(jnp.ceil(length / step), max_steps + 1.0)
-    return Path(p0, c0, u, length, landing, step)
+    landing = jnp.minimum(jnp.ceil(length / step_length), max_steps + 1.0)
+    return Path(p0, c0, u, length, landing, step_length)
 
 
 def sample(path: Path, k: Float[Array, ""]) -> Float[Array, "3"]:
     """p_k of the step rule: on the segment, and exactly c0 from step K on."""
-    return jnp.where(k >= path.landing, path.c0, path.p0 + (k * path.step) * path.u)
+    return jnp.where(k >= path.landing, path.c0, path.p0 + (k * path.step_length) * path.u)
 
 
 def first_sample(lo: Array, hi: Array, kmin: Array, path: Path, max_steps: Array) -> Array:
     """First sample index >= kmin whose t = min(k s, D) lies in [lo, hi]; inf if none
     up to max_steps. Works elementwise (one interval per task)."""
     inf = jnp.asarray(jnp.inf, path.length.dtype)
-    k1 = jnp.maximum(kmin, jnp.ceil(lo / path.step))
-    on_segment = (k1 < path.landing) & (k1 * path.step <= hi)
+    k1 = jnp.maximum(kmin, jnp.ceil(lo / path.step_length))
+    on_segment = (k1 < path.landing) & (k1 * path.step_length <= hi)
     at_end = (kmin <= path.landing) & (lo <= path.length) & (path.length <= hi)
     cand = jnp.where(on_segment, k1, jnp.where(at_end, path.landing, inf))
     return jnp.where(cand <= max_steps, cand, inf)
@@ -142,7 +142,7 @@ def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Arr
     code = jnp.where(found, jnp.where(nearest_rule, code_nearest, code_fail), TIMEOUT)
     k = jnp.where(found, act.step, max_steps.astype(act.step.dtype))
     return Outcome(code.astype(jnp.int32), jnp.where(found, nearest, -1), k.astype(jnp.int32),
-                   sample(path, k), jnp.minimum(k * path.step, path.length))
+                   sample(path, k), jnp.minimum(k * path.step_length, path.length))
 
 
 def meta_window(init: shapes.Prepared, mask: Bool[Array, " T"], cluster: Int[Array, " T"],
@@ -183,11 +183,11 @@ def rotate_along_path(r0: Float[Array, "4"], inside: Bool[Array, " W"],
 def _rotation_scan(r0, inside, targets, max_angle, emit: bool):
     # Without collisions nothing reads the per-sample R, so it is not emitted (on the GPU
     # the tracking is most of the time, and the extra writes would cost).
-    def step(r, x):
+    def turn(r, x):
         ok, target = x
         return jnp.where(ok, quat.rotate_towards(r, target, max_angle), r), r if emit else None
 
-    return jax.lax.scan(step, r0, (inside, targets))
+    return jax.lax.scan(turn, r0, (inside, targets))
 
 
 def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> Array:

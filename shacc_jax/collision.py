@@ -30,14 +30,16 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from geometry_precompute.schema import BOX, CYLINDER
+
+from . import automaton as am
 from . import quaternion as quat
 
 PENETRATION_EPS = 1e-4  # m: deeper than rounding and MJX's SDF approximation at grazing
 # Where unused object slots wait. A tuple, not a jax array: importing this module must not
-# start a JAX backend (the sweep's precompute workers import it and never use JAX).
+# start a JAX backend (a process may import the package and never evaluate).
 PARKED = (0.0, 0.0, -100.0)
 N_GRIPPER = 3
-CYLINDER, BOX = 0, 1
 
 
 def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
@@ -130,3 +132,22 @@ def deepest(model, data, objects, p: Float[Array, "3"], q: Float[Array, "4"],
 
 def penetrates(model, data, objects, p, q, dims) -> Bool[Array, ""]:
     return deepest(model, data, objects, p, q, dims) < -PENETRATION_EPS
+
+
+def window_start(obj_kind, obj_center, obj_size, obj_mask, gripper: Float[Array, "4"],
+                 path: am.Path, max_steps: Array) -> Array:
+    """First sample at which the gripper's bounding sphere (about p) reaches an object's
+    bounding sphere; inf if none. A penetration needs that, so the samples before it
+    are skipped without loss. One scene's objects, one path."""
+    size = obj_size
+    r_obj = jnp.where(obj_kind == BOX, jnp.linalg.norm(size, axis=-1),
+                      jnp.hypot(size[:, 0], size[:, 1]))
+    reach = gripper_reach(gripper) + r_obj + 1e-3
+    rel = obj_center - path.p0
+    b = rel @ path.u
+    disc = b * b - (jnp.sum(rel * rel, axis=-1) - reach * reach)
+    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+    inf = jnp.asarray(jnp.inf, b.dtype)
+    ok = obj_mask & (disc >= 0)
+    lo, hi = jnp.where(ok, b - root, inf), jnp.where(ok, b + root, -inf)
+    return jnp.min(am.first_sample(lo, hi, jnp.zeros((), b.dtype), path, max_steps))

@@ -19,7 +19,7 @@ c_i = cos psi_i/2, s_i = sin psi_i/2; and that is the half angle of
 psi_M = atan2(sum_i w_i sin psi_i, sum_i w_i cos psi_i) (the double-angle
 identities give tan 2 theta = 2 m01 / (m00 - m11)). So R_M is the approach frame
 of the weighted sum of the members' unit approach directions
-(:func:`meta_target_yaw`); the general Markley average (:func:`meta_target`) is
+(:func:`meta_target_yaw_batch`); the general Markley average (:func:`meta_target_batch`) is
 needed only where a cluster has a top grasp. Where that sum vanishes, M's top
 eigenvalue is double and any average is as good: we take psi_M = 0.
 """
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
 from . import quaternion as quat
 from . import shapes
@@ -37,38 +37,24 @@ from .orientation import fixed_direction, horizontal_approach_quat, task_directi
 MIN_DISTANCE = 1e-6
 
 
-def meta_weights(opt: shapes.Prepared, in_cluster: Bool[Array, " T"],
-                 p: Float[Array, "3"]) -> Array:
-    return _normalised(_inverse_square(shapes.all_sdf(opt, p), in_cluster))
-
-
-def meta_target(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
-                cluster: Int[Array, " T"], orient, p: Float[Array, "3"],
-                tau: Array) -> tuple[Array, Float[Array, "4"]]:
-    """(p is in a meta region, R_M(p) of that region's cluster). One point;
-    :func:`meta_target_batch` is the batched form the evaluation uses."""
-    kind, q_fixed, axis = orient
-    return meta_target_batch(shapes.components_first(init), shapes.components_first(opt),
-                             mask, cluster, kind, q_fixed.T, axis.T, p, tau)
-
-
 def meta_target_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array, cluster: Array,
                       orient_kind: Array, orient_quat: Array, axis: Array, p: Array,
                       tau: Array) -> tuple[Array, Array]:
-    """:func:`meta_target` in the layout of :func:`meta_target_yaw_batch` (orient_quat
-    (4, T, *batch)): returns (inside (*batch), R_M (4, *batch))."""
+    """(p is in a meta region, R_M(p) of that region's cluster), the Markley average, in
+    the layout of :func:`meta_target_yaw_batch` (orient_quat (4, T, *batch)): returns
+    (inside (*batch), R_M (4, *batch))."""
     inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
     qs = task_orientation(orient_kind, orient_quat, axis, p)  # (4, T, *batch)
-    return inside, quat.markley_average_batch(qs, _normalised(w))
+    return inside, quat.markley_average_batch(qs, normalised(w))
 
 
-def _inverse_square(sd_opt: Array, in_cluster: Array) -> Array:
+def inverse_square_weights(sd_opt: Array, in_cluster: Array) -> Array:
     """SPEC section 8's unnormalised weights 1 / d_i^2, d_i = max(sdf_i^opt, 1e-6)."""
     d = jnp.maximum(sd_opt, MIN_DISTANCE)
     return jnp.where(in_cluster, 1.0 / (d * d), 0.0)
 
 
-def _normalised(w: Array) -> Array:
+def normalised(w: Array) -> Array:
     """Weights over axis 0 (tasks) scaled to sum to one."""
     return w / jnp.maximum(jnp.sum(w, axis=0), jnp.finfo(w.dtype).tiny)
 
@@ -80,7 +66,7 @@ def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]
     sd = shapes.prepared_sdf(init, p)
     inside = member & (sd <= tau)
     chosen = _chosen_cluster(inside, sd, cluster)
-    w = _inverse_square(shapes.prepared_sdf(opt, p), member & (cluster == chosen))
+    w = inverse_square_weights(shapes.prepared_sdf(opt, p), member & (cluster == chosen))
     return jnp.any(inside, axis=0), w
 
 
@@ -103,29 +89,13 @@ def yaw_directions(orient_quat: Float[Array, "T 4"]
     return jax.vmap(fixed_direction)(orient_quat)
 
 
-def yaw_only(mask: Bool[Array, " T"], cluster: Int[Array, " T"], is_yaw: Bool[Array, " T"]
-             ) -> Bool[Array, ""]:
-    """Whether :func:`meta_target_yaw` serves the scene: every cluster member's
-    orientation space is a horizontal approach frame."""
-    return jnp.all(is_yaw | ~(mask & (cluster >= 0)))
-
-
-def meta_target_yaw(init: shapes.Prepared, opt: shapes.Prepared, mask: Bool[Array, " T"],
-                    cluster: Int[Array, " T"], orient_kind: Int[Array, " T"],
-                    fixed_dir: Float[Array, "T 2"], axis: Float[Array, "T 2"],
-                    p: Float[Array, "3"], tau: Array) -> tuple[Array, Float[Array, "4"]]:
-    """:func:`meta_target` for scenes whose cluster members all have horizontal approach
-    frames (:func:`yaw_only`): the closed form of the module docstring, no eigenvector
-    iteration. One point; :func:`meta_target_yaw_batch` is the batched form the
-    evaluation uses. Tested equal to :func:`meta_target` in tests/test_quaternion.py."""
-    return meta_target_yaw_batch(shapes.components_first(init), shapes.components_first(opt),
-                                 mask, cluster, orient_kind, fixed_dir.T, axis.T, p, tau)
-
-
 def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array,
                           cluster: Array, orient_kind: Array, fixed_dir: Array, axis: Array,
                           p: Array, tau: Array) -> tuple[Array, Array]:
-    """:func:`meta_target_yaw` on arrays laid out for XLA: per-task arrays are
+    """R_M for scenes whose cluster members all have horizontal approach frames
+    (``Geometry.yaw_meta``): the closed form of the module docstring, no eigenvector
+    iteration (tested equal to the Markley average in tests/test_quaternion.py). On
+    arrays laid out for XLA: per-task arrays are
     (T, *batch), vectors put their components first, (3, T, *batch) or (2, T, *batch)
     (``shapes.components_first``), and p is (3, *batch); any shapes that broadcast
     work. Returns (inside (*batch), R_M (4, *batch)). The task reductions run over a

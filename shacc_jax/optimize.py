@@ -37,9 +37,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from geometry_precompute import schema
+
 from . import program_cache, shapes
 from .evaluation import activation_pass
-from .types import SUCCESS, Scenes, Search, SearchProblem
+from .types import SUCCESS, Geometry, Params, Search, SearchProblem
 
 SIGMA0 = 0.3  # CMA-ES's initial step, in units of each parameter's range
 GRID = 1024   # candidates lie on a grid of 1/GRID of each parameter's range
@@ -57,15 +59,17 @@ def spaces_at(center_init: Array, dims_init: Array, problem: SearchProblem, q: A
     return center, dims
 
 
-def _objective(sc: Scenes, pb: SearchProblem, q: Array) -> tuple[Array, Array]:
+def objective(geometry: Geometry, params: Params, pb: SearchProblem, q: Array
+              ) -> tuple[Array, Array]:
     """(successes on the search starts under the shrinking rules, summed volume) of one
     scene's candidate q (T, P); u_scene is successes / (search starts x tasks)."""
-    center, dims = spaces_at(sc.center_init, sc.dims_init, pb, q)
-    cand = sc._replace(starts=pb.opt_starts, center_opt=center, dims_opt=dims)
-    _, _, out = activation_pass(cand, "opt")  # outcomes (No, T)
-    counted = pb.opt_start_mask[:, None] & sc.task_mask[None, :]
+    g = geometry
+    center, dims = spaces_at(g.center_init, g.dims_init, pb, q)
+    cand = g._replace(starts=pb.opt_starts, center_opt=center, dims_opt=dims)
+    _, _, out = activation_pass(cand, params, "opt")  # outcomes (No, T)
+    counted = pb.opt_start_mask[:, None] & g.task_mask[None, :]
     hits = jnp.sum((out.code == SUCCESS) & counted, dtype=jnp.int32)
-    volume = jnp.sum(jnp.where(sc.task_mask, jax.vmap(shapes.volume)(sc.kind, dims), 0.0))
+    volume = jnp.sum(jnp.where(g.task_mask, jax.vmap(shapes.volume)(g.kind, dims), 0.0))
     return hits, volume
 
 
@@ -89,7 +93,8 @@ def _cma_es(population: int, solution: Array):
     return SymmetricCMA_ES(population_size=population, solution=solution)
 
 
-def _search_one(sc: Scenes, pb: SearchProblem, population: int, generations: int) -> Search:
+def _search_one(geometry: Geometry, settings: Params, pb: SearchProblem, population: int,
+                generations: int) -> Search:
     T, P = pb.q_init.shape
     span = pb.q_init - pb.q_min
     movable = pb.q_mask & (span > 0)
@@ -103,35 +108,35 @@ def _search_one(sc: Scenes, pb: SearchProblem, population: int, generations: int
                          1.0).reshape(T * P)
     # Success counts stay integers until the end: u = count / n is then one operation
     # on equal integers, never two roundings of the same value.
-    h_init, v_init = _objective(sc, pb, to_q(z_init))
-    h_shrunk, _ = _objective(sc, pb, to_q(z_shrunk))
-    n_counted = jnp.sum(pb.opt_start_mask, dtype=jnp.int32) * jnp.sum(sc.task_mask,
+    h_init, v_init = objective(geometry, settings, pb, to_q(z_init))
+    h_shrunk, _ = objective(geometry, settings, pb, to_q(z_shrunk))
+    n_counted = jnp.sum(pb.opt_start_mask, dtype=jnp.int32) * jnp.sum(geometry.task_mask,
                                                                      dtype=jnp.int32)
 
     def fitness(h, v):  # evosax minimises; half a success is worth all the volume
         return -(h.astype(span.dtype) + 0.5 * v / v_init)
 
     es = _cma_es(population, z_init)
-    params = es.default_params.replace(std_init=jnp.asarray(SIGMA0, span.dtype))
+    es_params = es.default_params.replace(std_init=jnp.asarray(SIGMA0, span.dtype))
     key = jax.random.key(pb.optimize_seed)
     key, k0 = jax.random.split(key)
     mean0 = z_shrunk if MEAN0 == "shrinking" else jnp.full_like(z_init, 0.5)
-    state = es.init(k0, mean0, params)
+    state = es.init(k0, mean0, es_params)
 
     def generation(carry, g):
         state, key, best_z, best_f, best_h, best_v = carry
         key, k_ask, k_tell = jax.random.split(key, 3)
-        pop, state = es.ask(k_ask, state, params)
+        pop, state = es.ask(k_ask, state, es_params)
         pop = jnp.round(jnp.clip(pop, 0.0, 1.0) * GRID) / GRID
         seeded = pop.at[0].set(z_init).at[1].set(z_shrunk)
         pop = jnp.where(g == 0, seeded, pop)
-        h, v = jax.vmap(lambda z: _objective(sc, pb, to_q(z)))(pop)
+        h, v = jax.vmap(lambda z: objective(geometry, settings, pb, to_q(z)))(pop)
         f = fitness(h, v)
         i = jnp.argmin(f)
         better = f[i] < best_f
         best = (jnp.where(better, pop[i], best_z), jnp.where(better, f[i], best_f),
                 jnp.where(better, h[i], best_h), jnp.where(better, v[i], best_v))
-        state, _ = es.tell(k_tell, pop, f, state, params)
+        state, _ = es.tell(k_tell, pop, f, state, es_params)
         return (state, key, *best), best[2]
 
     start = (state, key, z_shrunk, jnp.asarray(jnp.inf, span.dtype), h_shrunk, v_init)
@@ -143,11 +148,10 @@ def _search_one(sc: Scenes, pb: SearchProblem, population: int, generations: int
 
 
 @partial(jax.jit, static_argnames=("population", "generations"))
-def _search(inputs: tuple[Scenes, SearchProblem], population: int,
+def _search(geometry: Geometry, params: Params, problem: SearchProblem, population: int,
             generations: int) -> Search:
-    scenes, problem = inputs
     return jax.vmap(partial(_search_one, population=population, generations=generations))(
-        scenes, problem)
+        geometry, params, problem)
 
 
 _SEARCH_STRUCTURE = Search(*[0] * len(Search._fields))
@@ -160,7 +164,7 @@ def search_sizes(baked) -> tuple[int, int]:
     for name in ("optimize_population", "optimize_generations"):
         values = np.unique(np.asarray(getattr(baked, name)))
         if len(values) != 1:
-            names = baked.meta.get("names", []) if hasattr(baked, "meta") else []
+            names = getattr(baked, "labels", {}).get("names", [])
             raise ValueError(f"{name} differs between the scenes of one batch "
                              f"({values.tolist()}{', scenes ' + ', '.join(names) if names else ''}"
                              "); search them apart")
@@ -184,13 +188,14 @@ def search(baked, scenes_per_call: int | None = None) -> Search:
 
 
 def _search_groups(baked, scenes_per_call, population, generations) -> Search:
-    scenes = jax.tree.map(np.asarray, Scenes.from_bake(baked, np.float64))
+    geometry = jax.tree.map(np.asarray, Geometry.from_bake(baked, np.float64))
+    params = jax.tree.map(np.asarray, Params.from_bake(baked, np.float64))
     problem = jax.tree.map(np.asarray, SearchProblem.from_bake(baked, np.float64))
-    S = scenes.task_mask.shape[0]
-    n_tasks = scenes.task_mask.sum(axis=1)
+    S = geometry.task_mask.shape[0]
+    n_tasks = geometry.task_mask.sum(axis=1)
     static = {"population": population, "generations": generations}
     G = generations
-    dtype = scenes.center_init.dtype
+    dtype = geometry.center_init.dtype
     out = Search(q=problem.q_init.copy(), objective=np.zeros(S, dtype),
                  volume=np.zeros(S, dtype), objective_init=np.zeros(S, dtype),
                  objective_shrunk=np.zeros(S, dtype), history=np.zeros((S, G), dtype))
@@ -201,7 +206,7 @@ def _search_groups(baked, scenes_per_call, population, generations) -> Search:
         for a in range(0, len(members), per):
             idx = members[np.minimum(np.arange(a, a + per), len(members) - 1)]
             keep = members[a:a + per]
-            piece = (_cut(scenes, idx, n), _cut(problem, idx, n))
+            piece = (cut(geometry, idx, n), cut(params, idx, n), cut(problem, idx, n))
             found = program_cache.call("search", _search, static, piece, _SEARCH_STRUCTURE)
             found = jax.tree.map(lambda x, keep=keep: np.asarray(x)[:len(keep)], found)
             out.q[keep, :n] = found.q
@@ -210,14 +215,12 @@ def _search_groups(baked, scenes_per_call, population, generations) -> Search:
     return out
 
 
-# The fields whose second axis is the tasks (the others: starts, objects, settings).
-_PER_TASK = {"task_mask", "kind", "center_init", "quat_init", "dims_init", "center_opt",
-             "quat_opt", "dims_opt", "cluster", "orient_kind", "orient_quat", "orient_axis",
-             "q_mask", "q_min", "q_init", "q_shrunk", "center_dq", "dims_dq"}
+_PER_TASK = schema.per_task(schema.GEOMETRY + schema.SEARCH)
 
 
-def _cut(tree, idx: np.ndarray, n: int):
-    """Scenes ``idx`` of a Scenes or SearchProblem, cut to their first n tasks."""
+def cut(tree, idx: np.ndarray, n: int):
+    """Scenes ``idx`` of a Geometry, Params or SearchProblem (host arrays), cut to their
+    first n tasks."""
     return type(tree)(**{k: v[idx][:, :n] if k in _PER_TASK else v[idx]
                          for k, v in tree._asdict().items()})
 

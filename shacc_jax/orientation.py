@@ -12,9 +12,10 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from geometry_precompute.schema import POINT_TO_AXIS
+
 from . import quaternion as quat
 
-FIXED, POINT_TO_AXIS = 0, 1
 ON_AXIS = 1e-9
 
 

@@ -4,8 +4,9 @@ JAX's persistent compilation cache skips XLA's compilation, but every new proces
 still traces and lowers the evaluation (about 1.6 s of Python on a CPU for the
 vmapped Automaton, more than the rest of ``shacc evaluate`` together). This module
 stores the lowered program itself, serialised by ``jax.export``, keyed by everything
-that decides it: the source of this package, the jax and jaxlib versions, the
-backend, x64 mode, the static arguments and the input shapes and dtypes. A later
+that decides it: the source of this package and of the bake's schema, the jax and
+jaxlib versions, the backend, x64 mode, the static arguments and the input shapes
+and dtypes. A later
 process with the same key deserialises the program and calls it; its compilation
 then comes from the persistent cache. Any change to the code gives a new key.
 
@@ -35,11 +36,24 @@ def set_dir(path: str | Path | None) -> None:
     _DIR = None if path is None else Path(path)
 
 
+def get_dir() -> Path | None:
+    """The folder in use, None when the cache is off."""
+    return _DIR
+
+
+def forget_loaded() -> None:
+    """Drop the programs deserialised by this process (the next call reads the folder
+    again, as a new process would)."""
+    _LOADED.clear()
+
+
 def _source_hash() -> str:
     global _SOURCE_HASH
     if _SOURCE_HASH is None:
+        from geometry_precompute import schema  # its codes are compiled into the program
+
         h = hashlib.sha256()
-        for f in sorted(Path(__file__).parent.glob("*.py")):
+        for f in [*sorted(Path(__file__).parent.glob("*.py")), Path(schema.__file__)]:
             h.update(f.name.encode() + b"\0" + f.read_bytes())
         _SOURCE_HASH = h.hexdigest()
     return _SOURCE_HASH
@@ -54,16 +68,16 @@ def _key(name: str, static: tuple, tree, leaves: list) -> str:
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 
 
-def call(name: str, jitted: Callable, static: dict, args, out_example):
-    """``jitted(args, **static)`` through the exported program cache.
+def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
+    """``jitted(*args, **static)`` through the exported program cache.
 
     ``jitted`` is a ``jax.jit`` function whose static arguments are ``static``; it
-    takes the pytree ``args`` and returns a pytree shaped like ``out_example`` (any
+    takes the pytrees ``args`` and returns a pytree shaped like ``out_example`` (any
     instance of the output type: only its structure is used). Without a cache folder
     this is the plain call.
     """
     if _DIR is None:
-        return jitted(args, **static)
+        return jitted(*args, **static)
     leaves, in_tree = jax.tree.flatten(args)
     key = _key(name, tuple(sorted(static.items())), in_tree, leaves)
     run = _LOADED.get(key)
@@ -77,7 +91,7 @@ def call(name: str, jitted: Callable, static: dict, args, out_example):
                 exp = None
         if exp is None:
             def flat(*xs):
-                return tuple(jax.tree.leaves(jitted(jax.tree.unflatten(in_tree, xs),
+                return tuple(jax.tree.leaves(jitted(*jax.tree.unflatten(in_tree, xs),
                                                     **static)))
 
             specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]

@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from . import quaternion as quat
+from geometry_precompute.schema import BOX, CONE, CYLINDER, DISK  # noqa: F401
 
-CYLINDER, DISK, CONE, BOX = 0, 1, 2, 3
+from . import quaternion as quat
 
 
 def _safe_norm(v: Array) -> Array:
@@ -91,18 +91,6 @@ class Prepared(NamedTuple):
     trig: Float[Array, "3"]
 
 
-def components_first(s: Prepared) -> Prepared:
-    """Prepared shapes of shape (*batch, *components) rearranged to
-    (*components, *batch): rot (3, 3, ...), center, dims and trig (3, ...), kind as
-    is. :func:`prepared_sdf` works on either layout, and on this one any batch shape
-    broadcasts against points given as (3, *batch)."""
-    def lead(a, n):
-        return jnp.moveaxis(a, tuple(range(a.ndim - n, a.ndim)), tuple(range(n)))
-
-    return Prepared(s.kind, lead(s.center, 1), lead(s.rot, 2), lead(s.dims, 1),
-                    lead(s.trig, 1))
-
-
 def prepare(kind, center, q, dims) -> Prepared:
     alpha = _cone_angle(dims[1])
     trig = jnp.stack([jnp.tan(alpha), jnp.cos(alpha), jnp.sin(alpha)])
@@ -130,10 +118,11 @@ def _sqrt0(x: Array) -> Array:
 def prepared_sdf(s: Prepared, p: Float[Array, "3"]) -> Float[Array, ""]:
     """The exact signed distance, written on scalar components (no stacked 2- or
     3-vectors): under vmap over tasks and points every intermediate is then a plain
-    (points, tasks) array, and on :func:`components_first` shapes any batch shape
-    broadcasts (``rot[i, j]``, ``p[i]`` are whole arrays). The vectorised form of
-    :func:`sdf_and_project_local` ran 8 times slower on CPU (71 against 8.5 ns per
-    distance, 10 tasks x 1 M points); tests/test_shapes_jax.py checks both agree."""
+    (points, tasks) array, and on shapes laid out components first (rot (3, 3,
+    *batch), ...) any batch shape broadcasts (``rot[i, j]``, ``p[i]`` are whole
+    arrays). The vectorised form of :func:`sdf_and_project_local` ran 8 times slower
+    on CPU (71 against 8.5 ns per distance, 10 tasks x 1 M points);
+    tests/test_shapes_jax.py checks both agree."""
     rot, c, dims = s.rot, s.center, s.dims
     dx, dy, dz = p[0] - c[0], p[1] - c[1], p[2] - c[2]
     # Local coordinates R^T (p - c).

@@ -1,9 +1,11 @@
 """The pytrees the JAX half works on, built from the bake's arrays by name.
 
-Three kinds of data are kept apart (STYLE): ``Scenes`` (baked geometry and the
-per-scene numeric settings, pytree leaves so sweeps vary them without
-recompiling), the rollout state (inside the Automaton's loops), and static
-layout (array shapes and the tuple of modes, static arguments of the jit).
+Their fields are the bake's schema (``geometry_precompute.schema``: GEOMETRY, PARAMS,
+SEARCH), so the two halves cannot disagree on a name or an axis. Three kinds of data
+are kept apart (STYLE pattern 4): :class:`Geometry` (baked arrays), :class:`Params`
+(every rollout setting as a leaf, per scene, optionally with a leading axis of sweep
+points) and the static :class:`~geometry_precompute.schema.Layout`; the rollout state
+lives inside the Automaton's loops.
 """
 
 from __future__ import annotations
@@ -12,86 +14,37 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float, Int
 
-MODES = ("baseline", "shrinking", "shacc")
-# The fourth mode (SPEC section 17): shacc's rules on the spaces that the search found.
-# ``evaluate`` computes MODES; ``optimized`` needs the search first (shacc_jax.optimize).
-OPTIMIZED = "optimized"
-ALL_MODES = (*MODES, OPTIMIZED)
-OUTCOMES = ("success", "wrong", "ambiguous", "timeout", "collision")
-SUCCESS, WRONG, AMBIGUOUS, TIMEOUT, COLLISION = range(5)
-INVALID = -1  # the rollout's intended task is a padded (masked) task
+from geometry_precompute import schema
+from geometry_precompute.schema import (  # noqa: F401  (re-exported)
+    ALL_MODES,
+    AMBIGUOUS,
+    COLLISION,
+    INVALID,
+    MODES,
+    OPTIMIZED,
+    OUTCOMES,
+    SUCCESS,
+    TIMEOUT,
+    WRONG,
+    Layout,
+)
 
 
 class Spaces(NamedTuple):
     """One scene's position spaces (T tasks)."""
 
-    kind: Int[Array, " T"]
-    center: Float[Array, "T 3"]
-    quat: Float[Array, "T 4"]
-    dims: Float[Array, "T 3"]
+    kind: Array
+    center: Array
+    quat: Array
+    dims: Array
 
 
-class Scenes(NamedTuple):
-    """A batch of baked scenes (leading axis S) and their numeric settings."""
-
-    task_mask: Bool[Array, "S T"]
-    kind: Int[Array, "S T"]
-    center_init: Float[Array, "S T 3"]
-    quat_init: Float[Array, "S T 4"]
-    dims_init: Float[Array, "S T 3"]
-    center_opt: Float[Array, "S T 3"]
-    quat_opt: Float[Array, "S T 4"]
-    dims_opt: Float[Array, "S T 3"]
-    cluster: Int[Array, "S T"]
-    orient_kind: Int[Array, "S T"]
-    orient_quat: Float[Array, "S T 4"]
-    orient_axis: Float[Array, "S T 2"]
-    starts: Float[Array, "S N 7"]
-    obj_mask: Bool[Array, "S O"]
-    obj_kind: Int[Array, "S O"]
-    obj_center: Float[Array, "S O 3"]
-    obj_quat: Float[Array, "S O 4"]
-    obj_size: Float[Array, "S O 3"]
-    dt: Float[Array, " S"]
-    v_max: Float[Array, " S"]
-    omega_max: Float[Array, " S"]
-    activation_tol: Float[Array, " S"]
-    max_steps: Int[Array, " S"]
-    ambiguity_nearest: Bool[Array, " S"]
-    collision: Bool[Array, " S"]
-    gripper_finger_length: Float[Array, " S"]
-    gripper_finger_radius: Float[Array, " S"]
-    gripper_opening: Float[Array, " S"]
-    gripper_palm_radius: Float[Array, " S"]
-
-    @classmethod
-    def from_bake(cls, baked, dtype=None) -> Scenes:
-        """Read the bake's arrays by name (any object with those attributes, or a
-        mapping); floats are cast to ``dtype`` (default: float64 when jax_enable_x64
-        is on, else float32)."""
-        return _read_bake(cls, baked, dtype)
-
-    def gripper(self) -> Float[Array, "... 4"]:
-        """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
-        return jnp.stack([self.gripper_finger_length, self.gripper_finger_radius,
-                          self.gripper_opening, self.gripper_palm_radius], axis=-1)
-
-    def raw_spaces(self, which: str) -> Spaces:
-        return Spaces(self.kind, getattr(self, f"center_{which}"), getattr(self, f"quat_{which}"),
-                      getattr(self, f"dims_{which}"))
-
-    def spaces(self, which: str):
-        """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation matrices
-        and cone trigonometry computed once): a ``shapes.Prepared`` over tasks."""
-        from .shapes import prepare_all
-
-        return prepare_all(*self.raw_spaces(which))
-
-
-def _read_bake(cls, baked, dtype=None):
-    """``cls``'s fields read from the bake by name, floats cast to ``dtype``."""
+def _read(cls, baked, dtype=None):
+    """``cls``'s fields read from the bake by name (attributes or a mapping); floats
+    cast to ``dtype`` (default: float64 when jax_enable_x64 is on, else float32),
+    integers to int32."""
     dtype = dtype or jnp.zeros(()).dtype
     get = baked.__getitem__ if isinstance(baked, dict) else lambda k: getattr(baked, k)
     out = {}
@@ -105,23 +58,54 @@ def _read_bake(cls, baked, dtype=None):
     return cls(**out)
 
 
-class SearchProblem(NamedTuple):
-    """What the optimized mode's search needs beyond :class:`Scenes` (the bake's
-    search fields; P = 2 parameter slots per task, No search starts)."""
-
-    q_mask: Bool[Array, "S T P"]
-    q_min: Float[Array, "S T P"]
-    q_init: Float[Array, "S T P"]
-    q_shrunk: Float[Array, "S T P"]
-    center_dq: Float[Array, "S T 3 P"]
-    dims_dq: Float[Array, "S T 3 P"]
-    opt_starts: Float[Array, "S No 7"]
-    opt_start_mask: Bool[Array, "S No"]
-    optimize_seed: Int[Array, " S"]
-
+class _GeometryMethods:
     @classmethod
-    def from_bake(cls, baked, dtype=None) -> SearchProblem:
-        return _read_bake(cls, baked, dtype)
+    def from_bake(cls, baked, dtype=None):
+        return _read(cls, baked, dtype)
+
+    def spaces(self, which: str):
+        """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation
+        matrices and cone trigonometry computed once): a ``shapes.Prepared`` over
+        tasks."""
+        from .shapes import prepare_all
+
+        return prepare_all(self.kind, getattr(self, f"center_{which}"),
+                           getattr(self, f"quat_{which}"), getattr(self, f"dims_{which}"))
+
+
+class _ParamsMethods:
+    @classmethod
+    def from_bake(cls, baked, dtype=None):
+        return _read(cls, baked, dtype)
+
+    def gripper(self) -> Float[Array, "... 4"]:
+        """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
+        return jnp.stack([getattr(self, k) for k in schema.GRIPPER], axis=-1)
+
+
+def _pytree(name: str, fields, methods, doc: str):
+    base = NamedTuple(f"_{name}", [(f.name, Array) for f in fields])
+    return type(name, (base, methods), {"__doc__": doc, "__slots__": (),
+                                        "__module__": __name__})
+
+
+Geometry = _pytree("Geometry", schema.GEOMETRY, _GeometryMethods,
+                   "A batch's baked arrays (schema.GEOMETRY), leading axis S scenes.")
+Params = _pytree("Params", schema.PARAMS, _ParamsMethods,
+                 "Every rollout setting (schema.PARAMS): leaves of shape (S,), or (P, S) "
+                 "for P sweep points over one geometry.")
+SearchProblem = _pytree("SearchProblem", schema.SEARCH, _ParamsMethods,
+                        "What the optimized mode's search needs beyond Geometry and Params "
+                        "(schema.SEARCH).")
+
+
+def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,
+           samples_per_block: int = 16) -> tuple[Geometry, Params, Layout]:
+    """(geometry, params, layout) of a bake, ready for ``shacc_jax.evaluate``."""
+    from geometry_precompute.bake import batch_layout
+
+    return (Geometry.from_bake(baked, dtype), Params.from_bake(baked, dtype),
+            batch_layout(baked, modes, lanes_per_block, samples_per_block))
 
 
 class Search(NamedTuple):

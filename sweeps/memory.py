@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import os
 from dataclasses import replace
+from types import SimpleNamespace
 
 import jax
 import numpy as np
 
 import shacc_jax
 from geometry_precompute import BakedScenes, InputError
+from geometry_precompute.bake import batch_layout
 from shacc_jax.types import Evaluation, Rollouts
 
 # Device memory one rollout needs during evaluation, measured from the 10 000-scene run
@@ -86,29 +88,51 @@ def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
 
 
 def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
-                       limit: int | None = None) -> Evaluation:
-    """``evaluate(baked, modes)`` (default ``shacc_jax.evaluate_on_devices``) as NumPy
-    arrays, split over the start grid when the batch needs more than ``limit`` bytes
-    (default :func:`budget`)."""
-    evaluate = evaluate or shacc_jax.evaluate_on_devices
+                       limit: int | None = None, params=None) -> Evaluation:
+    """``evaluate(geometry, params, layout)`` (default ``shacc_jax.evaluate_on_devices``)
+    of a bake's ``modes``, as NumPy arrays, split over the start grid when the batch
+    needs more than ``limit`` bytes (default :func:`budget`). ``params``: P Params of
+    this bake's scenes (sweep points over its geometry), evaluated in one call with a
+    points axis; the results then have a leading axis P."""
+    run = evaluate or shacc_jax.evaluate_on_devices
+    stacked = None if params is None else jax.tree.map(
+        lambda *xs: np.stack([np.asarray(x) for x in xs]), *params)
+
+    def evaluate(b):
+        geometry, own, layout = shacc_jax.inputs(b, modes)
+        if stacked is None:
+            return run(geometry, own, layout)
+        # The layout of the geometry with every point's settings (collision checks if any
+        # point has them on).
+        layout = batch_layout(SimpleNamespace(**{**b.arrays(), **stacked._asdict()}), modes)
+        return run(geometry, stacked, layout)
+
     limit = budget() if limit is None else limit
     S, N, T, M = baked.n_scenes, baked.n_starts, baked.n_tasks, len(modes)
-    per_start = bytes_needed(S, 1, T, M)
+    P = 1 if params is None else len(params)
+    lead = 0 if params is None else 1  # a points axis before the scenes axis
+    per_start = bytes_needed(S, 1, T, M) * P
     if per_start * N <= limit:
-        return jax.tree.map(np.asarray, evaluate(baked, modes))
+        return jax.tree.map(np.asarray, evaluate(baked))
     n_per = limit // per_start
     if n_per < 1:
-        raise InputError("<memory>", "batch", f"one start pose of this batch ({S} scenes x "
-                         f"{T} tasks x {M} modes) needs {_size(per_start)}, more than the "
+        raise InputError("<memory>", "batch", f"one start pose of this batch ({P} x {S} "
+                         f"scenes x {T} tasks x {M} modes) needs {_size(per_start)}, more than the "
                          f"budget of {_size(limit)}; evaluate fewer scenes at once or raise "
                          f"${ENV}")
     pieces = []
     for a in range(0, N, n_per):
         idx = np.minimum(np.arange(a, a + n_per), N - 1)  # the last piece padded: one shape
-        out = evaluate(replace(baked, starts=baked.starts[:, idx]), modes)
+        out = evaluate(replace(baked, starts=baked.starts[:, idx]))
         keep = min(n_per, N - a)
-        pieces.append([np.asarray(x)[:, :, :keep] for x in out.rollouts])
-    rollouts = Rollouts(*(np.concatenate(parts, axis=2) for parts in zip(*pieces,
-                                                                          strict=True)))
-    metrics = shacc_jax.batch_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask)
+        pieces.append([np.take(np.asarray(x), np.arange(keep), axis=2 + lead)
+                       for x in out.rollouts])
+    rollouts = Rollouts(*(np.concatenate(parts, axis=2 + lead)
+                          for parts in zip(*pieces, strict=True)))
+    if lead:  # the points as more scenes
+        flat = [r.reshape(P * S, *r.shape[2:]) for r in (rollouts.outcome, rollouts.delta_R)]
+        metrics = shacc_jax.batch_metrics(*flat, np.tile(baked.task_mask, (P, 1)))
+        metrics = jax.tree.map(lambda a: np.asarray(a).reshape(P, S, *a.shape[1:]), metrics)
+    else:
+        metrics = shacc_jax.batch_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask)
     return Evaluation(rollouts, jax.tree.map(np.asarray, metrics))

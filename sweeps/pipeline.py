@@ -7,6 +7,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import jax
 import numpy as np
 
 import shacc_jax
@@ -74,12 +75,23 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     return _join_modes(parts, modes), found
 
 
+def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str]) -> list[Evaluation]:
+    """Bakes of the same scenes that differ only in rollout settings (Params), evaluated
+    as one call with a points axis; NumPy results, one Evaluation per bake. The
+    optimized mode searches per bake (its search depends on the rollout settings)."""
+    if len(bakes) == 1 or OPTIMIZED in modes:
+        return [evaluate_baked(b, modes)[0] for b in bakes]
+    ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), params=[
+        shacc_jax.Params.from_bake(b) for b in bakes])
+    return [jax.tree.map(lambda a, i=i: a[i], ev) for i in range(len(bakes))]
+
+
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
                      max_tasks: int | None = None, found: Search | None = None) -> Evaluated:
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
-    ev, found = evaluate_baked(baked, modes, shacc_jax.evaluate, found)
+    ev, found = evaluate_baked(baked, modes, found=found)
     t2 = time.perf_counter()
     return Evaluated(list(results), baked, ev, tuple(modes),
                      {"bake": t1 - t0, "evaluate": t2 - t1}, found)

@@ -127,7 +127,7 @@ def _outline_xy(shape) -> np.ndarray:
 def scene_top_view(result, ax=None, path=None, show_clusters: bool = True):
     """Top-down view: objects, initial (red) and optimised (blue) position spaces,
     clusters by label (the paper's Fig. 5a)."""
-    from geometry_precompute.templates import object_body
+    from geometry_precompute.bodies import object_body
 
     own = ax is None
     if own:

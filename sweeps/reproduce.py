@@ -31,9 +31,7 @@ from geometry_precompute import (
     DEFAULTS,
     InputError,
     PrecomputeResult,
-    load_scene,
     precompute,
-    random_scene,
     shipped_scene_paths,
 )
 
@@ -42,18 +40,12 @@ from .inputs import parse_sets
 from .output import check_output_dir, check_output_file, write_atomic, write_json
 from .pipeline import evaluate_results
 from .stats import mean_ci, pearson_ci
-from .workers import precompute_pool
+from .workers import precompute_pool, precompute_scene
 
 MODES = shacc_jax.ALL_MODES
 CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos")
 README_BEGIN = "<!-- reproduce:begin (written by shacc reproduce --readme) -->"
 README_END = "<!-- reproduce:end -->"
-
-
-def _precompute_task(item):
-    kind, ref, overrides = item
-    scene = load_scene(ref) if kind == "manual" else random_scene(ref[0], ref[1], 5, 10)
-    return precompute(scene, scene.settings(DEFAULTS, overrides))
 
 
 def _software() -> dict:
@@ -100,7 +92,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     _log(f"reproduce: {len(manual)} manual + {n_random} random scenes, modes "
           f"{', '.join(MODES)}")
     with precompute_pool(workers) as pool:
-        results = list(tqdm(pool.map(_precompute_task, items), total=len(items),
+        results = list(tqdm(pool.map(precompute_scene, items), total=len(items),
                             desc="precompute", unit="scene", file=sys.stderr,
                             disable=None))
     t_pre = time.perf_counter()

@@ -2,15 +2,18 @@
 disk cache, evaluate on the accelerator in chunks spread over the local devices,
 write Parquet, and resume after any interruption.
 
-Work is a list of chunks, each of one sweep point and up to ``chunk`` scenes, in a
-fixed order. A finished chunk is two Parquet files in ``OUT/parts/``, each written
-to a temporary name and renamed, the per-rollout part first: a chunk counts as done
-when its per-scene part exists, so a run killed at any moment (SIGKILL included)
-leaves only whole chunks (and perhaps a temporary file, which the rerun deletes),
-and the rerun redoes the unfinished ones. When every
-chunk is done, the parts are joined into ``OUT/scenes.parquet`` and
-``OUT/rollouts.parquet`` (also atomically); a rerun of a finished sweep does
-nothing.
+Work is a list of chunks, each of one group of sweep points and up to ``chunk``
+scenes, in a fixed order. Points that differ only in rollout settings (the schema's
+Params: speeds, tolerances, collisions, gripper sizes) share their geometry, so they
+form one group and are evaluated in one call, with a points axis on Params (the
+optimized mode's search depends on them: with it, each point is its own group). A
+finished chunk is two Parquet files in ``OUT/parts/``, each written to a temporary
+name and renamed, the per-rollout part first: a chunk counts as done when its
+per-scene part exists, so a run killed at any moment (SIGKILL included) leaves only
+whole chunks (and perhaps a temporary file, which the rerun deletes), and the rerun
+redoes the unfinished ones. When every chunk is done, the parts are joined into
+``OUT/scenes.parquet`` and ``OUT/rollouts.parquet`` (also atomically); a rerun of a
+finished sweep does nothing.
 
 The precompute cache (``--cache``, default ``~/.cache/shacc/precompute``) stores one
 pickle per (scene, precompute-stage settings) hash, so a rollout setting never
@@ -21,10 +24,8 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
 import json
 import os
-import pickle
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -37,16 +38,15 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-from geometry_precompute import DEFAULTS, InputError, bake, precompute
-from geometry_precompute.precompute import PRECOMPUTE_VERSION
-from geometry_precompute.scene import Scene, scene_to_dict
-from shacc_jax.types import OUTCOMES
+from geometry_precompute import DEFAULTS, SPECS, InputError, bake
+from geometry_precompute.scene import Scene
+from shacc_jax.types import OPTIMIZED, OUTCOMES
 
 from . import memory
 from .config import SweepConfig
 from .output import check_output_dir, write_atomic, write_json
-from .pipeline import evaluate_baked
-from .workers import precompute_pool
+from .pipeline import evaluate_points
+from .workers import precompute_cached, precompute_pool
 
 # For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
 # second (random 10-task scenes: 2 CPU cores 1.4e5, one H100 9.2e7); precompute per task
@@ -75,44 +75,36 @@ def default_cache() -> Path:
 @dataclass(frozen=True)
 class Chunk:
     index: int
-    point: int
+    points: tuple[int, ...]
     scenes: tuple[int, ...]
+
+
+def point_groups(cfg: SweepConfig) -> list[tuple[int, ...]]:
+    """The sweep's points grouped by everything but their rollout settings (in the order
+    of each group's first point); one point per group when the optimized mode runs."""
+    groups: dict[str, list[int]] = {}
+    for i, point in enumerate(cfg.points):
+        shared = {k: v for k, v in point.items() if SPECS[k].stage != "rollout"}
+        key = json.dumps(shared, sort_keys=True, default=str) if OPTIMIZED not in cfg.modes \
+            else str(i)
+        groups.setdefault(key, []).append(i)
+    return [tuple(g) for g in groups.values()]
 
 
 def plan(cfg: SweepConfig, n_scenes: int, chunk: int) -> list[Chunk]:
     out = []
-    for p in range(len(cfg.points)):
+    for points in point_groups(cfg):
         for start in range(0, n_scenes, chunk):
-            out.append(Chunk(len(out), p, tuple(range(start, min(start + chunk, n_scenes)))))
+            out.append(Chunk(len(out), points,
+                             tuple(range(start, min(start + chunk, n_scenes)))))
     return out
-
-
-def cache_key(scene: Scene, settings) -> str:
-    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute"),
-                       "version": PRECOMPUTE_VERSION}, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()
-
-
-def _precompute_cached(args):
-    scene, overrides, cache = args
-    settings = scene.settings(DEFAULTS, overrides)
-    path = Path(cache) / f"{cache_key(scene, settings)}.pkl"
-    if path.exists():
-        try:
-            with path.open("rb") as f:
-                r = pickle.load(f)
-            return replace(r, settings=settings), True
-        except (OSError, pickle.UnpicklingError, EOFError):
-            pass  # a damaged entry is recomputed and rewritten
-    r = precompute(scene, settings)
-    write_atomic(path, pickle.dumps(r))
-    return r, False
 
 
 def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
     """Scenes per chunk: the config's, lowered if the memory budget is short (a chunk of
     one scene that still does not fit is evaluated in pieces of its start grid)."""
-    per_scene = _bytes_per_scene(cfg, scenes, n_starts) * len(jax.local_devices())
+    per_scene = _bytes_per_scene(cfg, scenes, n_starts) * len(jax.local_devices()) * \
+        max(len(g) for g in point_groups(cfg))
     return max(1, min(cfg.chunk, memory.budget() // per_scene))
 
 
@@ -125,12 +117,15 @@ def _max_starts(cfg: SweepConfig, scenes: list[Scene]) -> int:
     return max(int(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"])) for p in cfg.points)
 
 
-def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, ...]:
-    point = cfg.points[chunk.point]
+def _tables(cfg: SweepConfig, chunk: Chunk, point_index: int, results, ev
+            ) -> tuple[pd.DataFrame, ...]:
+    """The per-scene and per-rollout rows of one point of a chunk (``ev``: that point's
+    evaluation)."""
+    point = cfg.points[point_index]
     ro, me = ev.rollouts, ev.metrics
     rows = []
     for i, (si, r) in enumerate(zip(chunk.scenes, results, strict=True)):
-        row = {"point": chunk.point, **{f"set.{k}": str(v) for k, v in point.items()},
+        row = {"point": point_index, **{f"set.{k}": str(v) for k, v in point.items()},
                "scene_index": si, "scene": r.scene.name, "n_tasks": len(r.spaces),
                "C_init": r.C_init, "C_final": r.C_final, "d": r.d, "h": r.h}
         for m, mode in enumerate(cfg.modes):
@@ -147,7 +142,7 @@ def _tables(cfg: SweepConfig, chunk: Chunk, results, ev) -> tuple[pd.DataFrame, 
     valid = ro.outcome >= 0
     outcome_names = np.array(OUTCOMES)
     rollouts_df = pd.DataFrame({
-        "point": np.full(valid.sum(), chunk.point, np.int32),
+        "point": np.full(valid.sum(), point_index, np.int32),
         "scene_index": np.asarray(chunk.scenes)[s_i[valid]].astype(np.int32),
         "mode": pd.Categorical(np.array(cfg.modes)[m_i[valid]], categories=list(cfg.modes)),
         "start": n_i[valid].astype(np.int32),
@@ -190,7 +185,7 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
     platform = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm") else "cpu"
     chunk = max(1, min(cfg.chunk, n))
     shapes = len({tuple(g) for g in grids}) * (1 if n % chunk == 0 else 2)
-    n_chunks = len(cfg.points) * -(-n // chunk)
+    n_chunks = len(point_groups(cfg)) * -(-n // chunk)
     est = {
         "precompute": len(stages) * tasks_total * PRECOMPUTE_S_PER_TASK / n_workers
         + WORKER_START_S,
@@ -199,7 +194,7 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
         "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
     }
     per_chunk = memory.BYTES_PER_ROLLOUT * int(max(np.prod(g) for g in grids)) * max_tasks * \
-        len(cfg.modes) * chunk
+        len(cfg.modes) * chunk * max(len(g) for g in point_groups(cfg))
     return {"points": len(cfg.points), "scenes": n, "scene_evaluations": len(cfg.points) * n,
             "rollouts": int(rollouts), "chunks": n_chunks, "chunk_scenes": chunk,
             "estimated_memory_per_chunk_MB": per_chunk / 2**20,
@@ -289,21 +284,26 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
     n_workers = workers or os.cpu_count() or 1
     with precompute_pool(n_workers) as pool:
         for c in todo:
-            point = cfg.points[c.point]
-            args = [(scenes[i], point, str(cache)) for i in c.scenes]
             t = time.perf_counter()
-            got = list(pool.map(_precompute_cached, args, chunksize=max(1, len(args) // 64)))
+            per_point = []
+            for i in c.points:
+                args = [(scenes[k], cfg.points[i], str(cache)) for k in c.scenes]
+                got = list(pool.map(precompute_cached, args,
+                                    chunksize=max(1, len(args) // 64)))
+                hits = sum(hit for _, hit in got)
+                hits_total += hits
+                computed += len(got) - hits
+                per_point.append([r for r, _ in got])
             t = lap("precompute", t)
-            results = [r for r, _ in got]
-            hits = sum(hit for _, hit in got)
-            hits_total += hits
-            computed += len(got) - hits
-            # One task count for every chunk, so chunks of a point share one compilation.
-            baked = bake(results, max_tasks)
+            # One task count for every chunk, so chunks of a group share one compilation.
+            bakes = [bake(results, max_tasks) for results in per_point]
             t = lap("bake", t)
-            ev, _ = evaluate_baked(baked, cfg.modes)
+            evs = evaluate_points(bakes, cfg.modes)
             t = lap("evaluate", t)
-            scenes_df, rollouts_df = _tables(cfg, c, results, ev)
+            tables = [_tables(cfg, c, i, results, ev)
+                      for i, results, ev in zip(c.points, per_point, evs, strict=True)]
+            scenes_df = pd.concat([a for a, _ in tables], ignore_index=True)
+            rollouts_df = pd.concat([b for _, b in tables], ignore_index=True)
             t = lap("tables", t)
             for name, df in (("rollouts", rollouts_df), ("scenes", scenes_df)):  # this order
                 _write_parquet(parts / f"{name}-{c.index:06d}.parquet",

@@ -1,4 +1,8 @@
-"""The precompute's worker processes (CPU only, no JAX).
+"""The precompute's worker processes (CPU only, no JAX), and the functions they run.
+
+The task functions live here, in a module that imports nothing from JAX: a spawned
+worker imports the module of the function it is sent, so a task defined beside the
+evaluation would load JAX into every worker (a test holds this).
 
 Started with spawn (forking a process in which JAX runs threads can deadlock). They
 ignore SIGINT: Ctrl-C reaches the whole process group, and the command, not each
@@ -12,11 +16,22 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import hashlib
+import json
 import multiprocessing
 import os
+import pickle
 import signal
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+from geometry_precompute import DEFAULTS, load_scene, precompute, random_scene
+from geometry_precompute.precompute import PRECOMPUTE_VERSION, PrecomputeResult
+from geometry_precompute.scene import Scene, scene_to_dict
+
+from .output import write_atomic
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
@@ -42,3 +57,36 @@ def precompute_pool(workers: int | None):
         pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
+
+
+def cache_key(scene: Scene, settings) -> str:
+    """The precompute cache's key: the scene, its precompute-stage settings and the
+    precompute's version (a rollout setting never triggers a new precompute)."""
+    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute"),
+                       "version": PRECOMPUTE_VERSION}, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+def precompute_cached(args) -> tuple[PrecomputeResult, bool]:
+    """(result, whether it came from the cache) of (scene, overrides, cache folder)."""
+    scene, overrides, cache = args
+    settings = scene.settings(DEFAULTS, overrides)
+    path = Path(cache) / f"{cache_key(scene, settings)}.pkl"
+    if path.exists():
+        try:
+            with path.open("rb") as f:
+                r = pickle.load(f)
+            return replace(r, settings=settings), True
+        except (OSError, pickle.UnpicklingError, EOFError):
+            pass  # a damaged entry is recomputed and rewritten
+    r = precompute(scene, settings)
+    write_atomic(path, pickle.dumps(r))
+    return r, False
+
+
+def precompute_scene(item) -> PrecomputeResult:
+    """``reproduce``'s task: ("manual", path, overrides) or ("random", (seed, kind),
+    overrides)."""
+    kind, ref, overrides = item
+    scene = load_scene(ref) if kind == "manual" else random_scene(ref[0], ref[1], 5, 10)
+    return precompute(scene, scene.settings(DEFAULTS, overrides))

@@ -54,3 +54,23 @@ def process_group_members(pgid: int) -> list[int]:
             if int(fields[2]) == pgid and fields[0] != "Z":
                 found.append(int(d.name))
     return found
+
+
+@pytest.fixture
+def count_compiles(caplog):
+    """``with count_compiles("evaluate") as found:`` collects the log lines of JAX's
+    compilations of that jitted function within the block (``jax.log_compiles``)."""
+    import contextlib
+    import logging
+
+    import jax
+
+    @contextlib.contextmanager
+    def counting(name: str):
+        found: list[str] = []
+        with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+            start = len(caplog.records)
+            yield found
+            found.extend(r.getMessage() for r in caplog.records[start:]
+                         if f"Compiling jit({name})" in r.getMessage())
+    return counting

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from geometry_precompute.frames import frame_from_approach
+from geometry_precompute.schema import KINDS, POINT_TO_AXIS
 
 OUTCOME_NAMES = ("success", "wrong", "ambiguous", "timeout", "collision")
 PENETRATION = 1e-4  # m: deeper than this counts as a collision (as in shacc_jax.collision)
@@ -98,7 +99,7 @@ def _wxyz(r: Rotation) -> np.ndarray:
 
 
 def task_rotation(orient_kind, orient_quat, axis, p) -> Rotation:
-    if orient_kind == 1:
+    if orient_kind == POINT_TO_AXIS:
         v = np.array([axis[0] - p[0], axis[1] - p[1], 0.0])
         if np.hypot(v[0], v[1]) > 1e-9:
             return Rotation.from_matrix(frame_from_approach(v))
@@ -141,7 +142,7 @@ class Collider:
         r_f, r_p = float(baked.gripper_finger_radius[s]), float(baked.gripper_palm_radius[s])
         geoms = []
         for o in np.flatnonzero(baked.obj_mask[s]):
-            kind = "box" if baked.obj_kind[s, o] == 1 else "cylinder"
+            kind = KINDS[baked.obj_kind[s, o]]
             size = baked.obj_size[s, o] if kind == "box" else baked.obj_size[s, o][:2]
             fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
             pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'

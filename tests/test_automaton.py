@@ -4,6 +4,8 @@ properties the modes must have."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import jax
 import numpy as np
 import pytest
@@ -12,20 +14,18 @@ from scipy.spatial.transform import Rotation
 
 import shacc_jax
 from geometry_precompute import bake, extra_scene_paths, load_scene, precompute
-from shacc_jax.evaluation import _evaluate, default_block_size, static_layout
-from shacc_jax.types import INVALID, SUCCESS, Scenes
+from shacc_jax.types import INVALID, SUCCESS, Geometry
 
 
-def run(baked, modes=shacc_jax.MODES, x64=False, meta=None):
+def run(baked, modes=shacc_jax.MODES, x64=False, meta=None, **layout):
     """The public evaluate; with ``meta`` the meta-target formula is forced ("general":
-    the Markley average even where the closed form for horizontal frames applies)."""
+    the Markley average even where the closed form for horizontal frames applies);
+    other keywords replace Layout fields (block sizes)."""
     with jax.enable_x64(x64):
-        scenes = Scenes.from_bake(baked, np.float64 if x64 else np.float32)
-        if meta is None:
-            ev = shacc_jax.evaluate(scenes, modes)
-        else:
-            layout = static_layout(scenes) | {"meta": meta}
-            ev = _evaluate(scenes, tuple(modes), default_block_size(), **layout)
+        g, p, lay = shacc_jax.inputs(baked, modes, np.float64 if x64 else np.float32)
+        if meta is not None:
+            layout["meta_formula"] = meta
+        ev = shacc_jax.evaluate(g, p, replace(lay, **layout))
         return jax.tree.map(np.asarray, ev)
 
 
@@ -73,7 +73,7 @@ def test_agrees_with_reference_float64(shipped_bake, reference):
 def test_markley_path_agrees_with_reference(shipped_bake, reference):
     """Every shipped scene's clusters have horizontal approach frames only, so evaluate
     takes the closed form; the general Markley path, forced, agrees as well."""
-    assert static_layout(Scenes.from_bake(shipped_bake))["meta"] == "yaw"
+    assert shipped_bake.layout().meta_formula == "yaw"
     compare(run(shipped_bake, meta="general"), reference, dr_tol=5e-3)
     compare(run(shipped_bake, x64=True, meta="general"), reference, dr_tol=1e-6)
 
@@ -84,9 +84,9 @@ def test_top_grasp_cluster_and_mixed_batch(shipped_results):
     path: the same rollouts as separate runs, and the reference's in both precisions."""
     tray = precompute(load_scene(extra_scene_paths()[0]))
     assert tray.meta_clusters() == [[0, 1, 2]]
-    assert static_layout(Scenes.from_bake(bake([tray])))["meta"] == "general"
+    assert bake([tray]).layout().meta_formula == "general"
     mixed = bake([shipped_results[8], tray, shipped_results[2]])
-    assert static_layout(Scenes.from_bake(mixed))["meta"] == "both"
+    assert mixed.layout().meta_formula == "both"
     # The reference for the tray's rollouts (the shipped scenes' are checked above).
     table = reference_table(mixed, [0, 3, 0])
     together = run(mixed)
@@ -188,25 +188,65 @@ def test_metrics_follow_rollouts(shipped_bake):
             assert me.delta_R_mean[s, m] == pytest.approx(d.mean(), rel=1e-5)
 
 
-def test_settings_are_leaves_no_recompile(shipped_results):
-    from shacc_jax.evaluation import _evaluate
-
+def test_settings_are_leaves_no_recompile(shipped_results, count_compiles):
     rs = shipped_results[:2]
     b = bake(rs)
-    run(b)
-    before = _evaluate._cache_size()
-    for overrides in ({"v_max": 0.25}, {"dt": 0.01, "omega_max": 1.5},
-                      {"activation_tol": 1e-3, "ambiguity": "nearest", "max_steps": 300}):
-        run(bake([precompute(r.scene, r.settings.with_overrides(overrides)) for r in rs]))
-    assert _evaluate._cache_size() == before
+    with count_compiles("evaluate") as first:
+        run(b)
+    with count_compiles("evaluate") as later:
+        for overrides in ({"v_max": 0.25}, {"dt": 0.01, "omega_max": 1.5},
+                          {"activation_tol": 1e-3, "ambiguity": "nearest", "max_steps": 300}):
+            run(bake([precompute(r.scene, r.settings.with_overrides(overrides)) for r in rs]))
+    assert len(first) <= 1 and later == []  # (the first may be cached by an earlier test)
 
 
 def test_montecarlo_clutteredness_agrees_with_mesh(shipped_results, shipped_bake):
-    sc = Scenes.from_bake(shipped_bake)
+    g = Geometry.from_bake(shipped_bake)
     key = jax.random.PRNGKey(0)
     for s, r in enumerate(shipped_results):
         for which, c_mesh in (("init", r.C_init), ("opt", r.C_final)):
             k = jax.random.fold_in(key, 2 * s + (which == "opt"))
-            spaces = jax.tree.map(lambda a, s=s: a[s], sc.raw_spaces(which))
-            c = float(shacc_jax.clutteredness_mc(spaces, sc.task_mask[s], k, 1 << 16))
+            spaces = shacc_jax.Spaces(g.kind[s], getattr(g, f"center_{which}")[s],
+                                      getattr(g, f"quat_{which}")[s],
+                                      getattr(g, f"dims_{which}")[s])
+            c = float(shacc_jax.clutteredness_mc(spaces, g.task_mask[s], k, 1 << 16))
             assert abs(c - c_mesh) < 0.01, (r.scene.name, which, c, c_mesh)
+
+
+def test_points_axis_equals_one_call_per_point(shipped_results):
+    """Params with a leading axis of sweep points: one call gives, per point, what a
+    call with that point's settings gives (the lanes of all points share one lane
+    sort; each rollout depends only on its own scene and settings)."""
+    b = bake(shipped_results[7:9])
+    g, p, layout = shacc_jax.inputs(b)
+    points = jax.tree.map(lambda a: np.stack([np.asarray(a)] * 3), p)
+    points = points._replace(
+        v_max=points.v_max * np.array([[1.0], [0.5], [2.0]], points.v_max.dtype),
+        ambiguity_nearest=np.array([[False] * 2, [True] * 2, [False, True]]),
+        omega_max=points.omega_max * np.array([[1.0], [1.0], [0.3]], points.omega_max.dtype))
+    together = jax.tree.map(np.asarray, shacc_jax.evaluate(g, points, layout))
+    assert together.rollouts.outcome.shape == (3, 2, 3, b.n_starts, b.n_tasks)
+    for i in range(3):
+        alone = shacc_jax.evaluate(g, jax.tree.map(lambda a, i=i: a[i], points), layout)
+        for x, y in zip(jax.tree.leaves(alone), jax.tree.leaves(together), strict=True):
+            x, y = np.asarray(x), y[i]
+            if x.dtype.kind == "f":
+                np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6, equal_nan=True)
+            else:
+                np.testing.assert_array_equal(x, y)
+    # The settings changed something: half the speed takes more steps to the same spaces.
+    assert together.rollouts.step[1].sum() > together.rollouts.step[0].sum()
+
+
+def test_evaluate_is_traceable(shipped_results):
+    """No host reads of array values inside: evaluate runs under an outer jit and lowers
+    ahead of time, with the same results."""
+    g, p, layout = shacc_jax.inputs(bake(shipped_results[:2]), ("baseline", "shacc"))
+    direct = shacc_jax.evaluate(g, p, layout)
+    wrapped = jax.jit(lambda g, p: shacc_jax.evaluate(g, p, layout).metrics.u_scene)(g, p)
+    np.testing.assert_array_equal(np.asarray(wrapped), np.asarray(direct.metrics.u_scene))
+    compiled = shacc_jax.evaluate.lower(g, p, layout).compile()
+    np.testing.assert_array_equal(np.asarray(compiled(g, p).rollouts.outcome),
+                                  np.asarray(direct.rollouts.outcome))
+    with pytest.raises(ValueError, match="n_tasks"):
+        shacc_jax.evaluate(g, p, replace(layout, n_tasks=layout.n_tasks + 1))

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry_precompute import InputError, bake, precompute, random_scene
-from geometry_precompute.bake import ARRAY_FIELDS, PARAM_FIELDS, SEARCH_FIELDS
+from geometry_precompute import InputError, bake, precompute, random_scene, schema
 from geometry_precompute.settings import DEFAULTS
 
 
@@ -17,9 +16,44 @@ def test_bake_shapes_and_padding(shipped_results):
     assert b.center_init.shape == (S, T, 3) and b.quat_opt.shape == (S, T, 4)
     assert b.task_mask[:, :3].all() and not b.task_mask[:, 3:].any()
     assert (b.cluster[:, 3:] == -1).all()
-    for k in ARRAY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS:
+    for k in b.arrays():
         assert np.all(np.isfinite(getattr(b, k).astype(float))), k
     np.testing.assert_allclose(np.linalg.norm(b.quat_init, axis=-1), 1.0)
+
+
+def test_bake_arrays_follow_the_schema(shipped_results):
+    """Every schema field is baked once, with the schema's dtype and rank; a named axis
+    has one size across all fields (S, T, N, O, P, No) and a numbered one that size."""
+    b = bake(shipped_results[:3], max_tasks=5)
+    fields = schema.GEOMETRY + schema.PARAMS + schema.SEARCH
+    assert list(b.arrays()) == [f.name for f in fields]
+    sizes = {}
+    kinds = {"bool": "b", "int": "iu", "float": "f"}
+    for f in fields:
+        a = getattr(b, f.name)
+        assert a.dtype.kind in kinds[f.dtype], (f.name, a.dtype)
+        assert a.ndim == len(f.shape), (f.name, a.shape, f.shape)
+        for axis, n in zip(f.shape, a.shape, strict=True):
+            assert sizes.setdefault(axis, n) == n if isinstance(axis, str) else axis == n, \
+                (f.name, axis, n)
+    assert sizes["S"] == 3 and sizes["T"] == 5 and sizes["P"] == schema.MAX_PARAMS
+    assert set(b.obj_kind[b.obj_mask]) <= {schema.CYLINDER, schema.BOX}
+
+
+def test_layout_is_read_off_the_bake_once(shipped_results):
+    """Layout: padded sizes, the modes, and the meta formula from the baked flags; it
+    is hashable (a static argument) and refuses what it cannot mean."""
+    b = bake(shipped_results[:3])
+    lay = b.layout(("shacc",))
+    assert (lay.n_tasks, lay.n_starts, lay.n_objects) == (b.n_tasks, b.n_starts,
+                                                          b.obj_mask.shape[1])
+    assert lay.modes == ("shacc",) and hash(lay) == hash(b.layout(["shacc"]))
+    assert lay.meta_formula == "yaw" and b.yaw_meta.all()
+    assert not lay.collision_checks and not lay.box_objects
+    with pytest.raises(ValueError, match=r"Layout\.modes"):
+        b.layout(("shacc", "bogus"))
+    with pytest.raises(ValueError, match="lanes_per_block"):
+        b.layout(lanes_per_block=0)
 
 
 def test_bake_values_follow_results(shipped_results):

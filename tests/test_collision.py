@@ -13,10 +13,9 @@ from scipy.spatial.transform import Rotation
 from test_automaton import compare, reference_table, run
 
 import shacc_jax
-from geometry_precompute import bake, precompute
-from geometry_precompute.scene import scene_from_dict
+from geometry_precompute import bake, precompute, scene_from_dict
 from shacc_jax import collision as col
-from shacc_jax.types import COLLISION, SUCCESS, Scenes
+from shacc_jax.types import COLLISION, SUCCESS, Geometry, Params
 
 MODES = {m: i for i, m in enumerate(shacc_jax.MODES)}
 
@@ -44,7 +43,7 @@ def test_gripper_capsules_match_the_reference_layout():
         p, r = rng.normal(size=3) * 0.1, Rotation.random(random_state=rng)
         q = jnp.asarray(np.roll(r.as_quat(), 1), jnp.float32)
         centres, mats, sizes = col.gripper_geoms(jnp.asarray(p, jnp.float32), q,
-                                                 Scenes.from_bake(baked).gripper()[0])
+                                                 Params.from_bake(baked).gripper()[0])
         ref.deepest(p, r)  # poses the reference capsules
         np.testing.assert_allclose(centres, ref.data.geom_xpos[ref.n_obj:], atol=1e-6)
         np.testing.assert_allclose(np.abs(mats.reshape(3, 9)),  # the palm's axis sign is free
@@ -67,7 +66,7 @@ def test_mjx_penetrations_agree_with_cpu_mujoco():
         "tasks": [{"id": "t", "object": "a", "template": "side_grasp"}],
     }, "<poses>")
     baked = bake([precompute(scene, scene.settings())])
-    sc = Scenes.from_bake(baked)
+    sc = Geometry.from_bake(baked)
     _, model, data = col.collision_model(3, True)
     objects = col.object_geoms(sc.obj_kind[0], sc.obj_center[0], sc.obj_quat[0],
                                sc.obj_size[0], sc.obj_mask[0], True)
@@ -76,9 +75,10 @@ def test_mjx_penetrations_agree_with_cpu_mujoco():
     P = rng.uniform([-0.1, -0.1, 0.0], [0.25, 0.3, 0.15], (n, 3))
     R = Rotation.random(n, random_state=1)
     Q = np.roll(R.as_quat(), 1, axis=1)
+    gripper = Params.from_bake(baked).gripper()[0]
     got = np.asarray(jax.jit(jax.vmap(lambda p, q: col.deepest(
-        model, data, objects, p, q, sc.gripper()[0])))(jnp.asarray(P, jnp.float32),
-                                                       jnp.asarray(Q, jnp.float32)))
+        model, data, objects, p, q, gripper)))(jnp.asarray(P, jnp.float32),
+                                               jnp.asarray(Q, jnp.float32)))
     ref = Collider(baked, 0)
     want = np.array([ref.deepest(p, r) for p, r in zip(P, R, strict=True)])
     clear = np.abs(want) > 2e-3
@@ -144,7 +144,8 @@ def test_collision_rollouts_agree_with_reference(colliding):
     b, ev = colliding
     ro = ev.rollouts
     table = reference_table(b, [3, 3, 3])
-    sc = Scenes.from_bake(b)
+    sc = Geometry.from_bake(b)
+    gripper = Params.from_bake(b).gripper()
     _, model, data = col.collision_model(b.obj_mask.shape[1], False)
     late = 0
     agree = {}
@@ -159,7 +160,7 @@ def test_collision_rollouts_agree_with_reference(colliding):
         objects = col.object_geoms(sc.obj_kind[s], sc.obj_center[s], sc.obj_quat[s],
                                    sc.obj_size[s], sc.obj_mask[s], False)
         gap = col.deepest(model, data, objects, jnp.asarray(ref.point, jnp.float32),
-                          jnp.asarray(ref.quat, jnp.float32), sc.gripper()[s])
+                          jnp.asarray(ref.quat, jnp.float32), gripper[s])
         assert float(gap) < 0.01, (key, float(gap))
         late += 1
     assert late <= 0.04 * len(table), late
@@ -167,7 +168,7 @@ def test_collision_rollouts_agree_with_reference(colliding):
     assert (ro.outcome == COLLISION).sum() > 20
 
 
-def test_mixed_batch_and_no_recompile():
+def test_mixed_batch_and_no_recompile(count_compiles):
     """Scenes with and without collision checking, and of different object counts, in
     one batch: each scene's rollouts equal its own evaluation's. New object poses and
     gripper sizes reuse the compiled computation."""
@@ -180,20 +181,41 @@ def test_mixed_batch_and_no_recompile():
         np.testing.assert_array_equal(ev.rollouts.outcome[s], alone.rollouts.outcome[0])
     assert ev.rollouts.outcome[0, 0, 0, 0] == COLLISION
     assert ev.rollouts.outcome[2, 0, 0, 0] == SUCCESS
-    before = shacc_jax.evaluation._evaluate._cache_size()
     moved = bake([designed(0.05), designed(-0.2, **{"gripper.finger_radius": 0.02}), off])
-    run(moved)
-    assert shacc_jax.evaluation._evaluate._cache_size() == before
+    with count_compiles("evaluate") as found:
+        run(moved)
+    assert found == []
 
 
 def test_importing_the_package_starts_no_jax_backend():
-    """The sweep's precompute workers import shacc_jax (through sweeps.runner) and must
-    never start a backend: on a GPU machine each would try to take most of the GPU's
-    memory. So no module of the package may create a JAX array at import time."""
+    """No module of the package may create a JAX array at import time: a process that
+    imports it for anything else would start a backend (on a GPU machine, take most of
+    the GPU's memory)."""
     import subprocess
     import sys
 
     code = ("import sweeps.runner, shacc_jax, shacc_jax.collision\n"
             "from jax._src import xla_bridge\n"
             "assert not xla_bridge._backends, xla_bridge._backends\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_worker_and_scene_modules_import_no_jax_or_collision_library():
+    """The precompute workers' module imports nothing from JAX (spawned workers import
+    the module of the task they are sent), and reading a scene file imports neither
+    JAX nor coal, trimesh or manifold3d; the JAX half imports none of the mesh and
+    collision libraries."""
+    import subprocess
+    import sys
+
+    from geometry_precompute import shipped_scene_paths
+
+    heavy = "('jax', 'coal', 'trimesh', 'manifold3d')"
+    code = ("import sys\nimport sweeps.workers\nfrom geometry_precompute import load_scene\n"
+            f"load_scene({str(shipped_scene_paths()[0])!r})\n"
+            f"loaded = [m for m in {heavy} if m in sys.modules]\n"
+            "assert not loaded, loaded\n"
+            "import shacc_jax\n"
+            f"loaded = [m for m in {heavy}[1:] if m in sys.modules]\n"
+            "assert not loaded, loaded\n")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -7,8 +7,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from geometry_precompute.bodies import object_body
 from geometry_precompute.mjcf import scene_to_mjcf
-from geometry_precompute.templates import object_body
 from sweeps.cli import main
 
 

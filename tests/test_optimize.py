@@ -23,8 +23,8 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from shacc_jax import optimize
-from shacc_jax.optimize import _PER_TASK, _objective, optimized_spaces, search, spaces_at
-from shacc_jax.types import Scenes, SearchProblem
+from shacc_jax.optimize import cut, objective, optimized_spaces, search, spaces_at
+from shacc_jax.types import Geometry, Params, SearchProblem
 from sweeps.cli import main
 from sweeps.pipeline import evaluate_baked
 
@@ -84,18 +84,19 @@ def test_search_finds_the_brute_force_best():
 
 
 def _brute_force(baked, found, results):
-    scenes = Scenes.from_bake(baked, np.float64)
+    geometry = Geometry.from_bake(baked, np.float64)
+    params = Params.from_bake(baked, np.float64)
     problem = SearchProblem.from_bake(baked, np.float64)
     n = 41
     g = np.linspace(0.0, 1.0, n)
     for s in range(2):
-        sc, pb = (jax.tree.map(lambda a, s=s: a[s], x) for x in (scenes, problem))
+        sc, pa, pb = (jax.tree.map(lambda a, s=s: a[s], x) for x in (geometry, params, problem))
         lo, hi = np.asarray(pb.q_min[:, 0]), np.asarray(pb.q_init[:, 0])
         grid = np.zeros((n * n, 2, 2))
         grid[:, 0, 0] = np.repeat(lo[0] + g * (hi[0] - lo[0]), n)
         grid[:, 1, 0] = np.tile(lo[1] + g * (hi[1] - lo[1]), n)
         hits, v = map(np.asarray, jax.jit(jax.vmap(
-            lambda q, sc=sc, pb=pb: _objective(sc, pb, q)))(jnp.asarray(grid)))
+            lambda q, sc=sc, pa=pa, pb=pb: objective(sc, pa, pb, q)))(jnp.asarray(grid)))
         n_counted = int(pb.opt_start_mask.sum()) * int(sc.task_mask.sum())
         best = np.lexsort((v, hits))[-1]
         assert round(float(found.objective[s]) * n_counted) >= hits[best]
@@ -235,9 +236,16 @@ def test_a_given_search_is_used_not_run_again(small_search, monkeypatch):
     np.testing.assert_array_equal(again.rollouts.outcome, ref.rollouts.outcome)
 
 
-def test_cut_knows_every_per_task_field():
-    """The fields ``search`` cuts to a group's task count are exactly those whose second
-    axis is the tasks, by their annotations."""
-    for cls in (Scenes, SearchProblem):
-        for name, ann in cls.__annotations__.items():
-            assert ("S T" in str(ann)) == (name in _PER_TASK), name
+def test_cut_cuts_every_task_axis(shipped_results):
+    """``cut`` takes scenes and their first n tasks: every array whose second axis is
+    the tasks (by the bake's shapes, padded to 5 tasks) becomes n long there, and
+    nothing else changes."""
+    baked = bake(shipped_results[:3], max_tasks=5)
+    for tree in (Geometry, Params, SearchProblem):
+        host = jax.tree.map(np.asarray, tree.from_bake(baked))
+        got = cut(host, np.array([2, 0]), 3)
+        for name, a, c in zip(tree._fields, host, got, strict=True):
+            task_axis = a.ndim >= 2 and a.shape[1] == 5
+            want = (2, 3, *a.shape[2:]) if task_axis else (2, *a.shape[1:])
+            assert c.shape == want, (name, c.shape, want)
+            np.testing.assert_array_equal(c[1], a[0][:3] if task_axis else a[0])

@@ -215,13 +215,13 @@ def recorded():
 
 def test_cache_key_names_the_precompute_version(monkeypatch):
     """Results cached before the fast volumes are computed again, not mixed in."""
-    import sweeps.runner as runner
+    import sweeps.workers as workers
     from geometry_precompute import DEFAULTS, random_scene
 
     sc = random_scene(3, "uniform", 3, 3)
-    key = runner.cache_key(sc, DEFAULTS)
-    monkeypatch.setattr(runner, "PRECOMPUTE_VERSION", 1)
-    assert runner.cache_key(sc, DEFAULTS) != key
+    key = workers.cache_key(sc, DEFAULTS)
+    monkeypatch.setattr(workers, "PRECOMPUTE_VERSION", 1)
+    assert workers.cache_key(sc, DEFAULTS) != key
 
 
 def test_recorded_scenes_cover_the_set(recorded):
@@ -254,7 +254,7 @@ def test_cached_start_draws_equal_the_generator():
     """The start orientations and search starts, drawn once per process, equal drawing
     them from a new generator each time (numpy's uniform is lo + (hi - lo) u)."""
     from geometry_precompute import DEFAULTS, random_scene
-    from geometry_precompute.starts import _plane, optimize_start_poses, start_orientations
+    from geometry_precompute.starts import optimize_start_poses, start_orientations, start_plane
 
     for i in range(30):
         sc = random_scene(i, "uniform", 2, 12)
@@ -263,7 +263,7 @@ def test_cached_start_draws_equal_the_generator():
                                      "start_orientation": "forward" if i % 5 == 0 else "random"})
         n = s["optimize_starts"]
         rng = np.random.default_rng(s["optimize_seed"])
-        x, (y0, y1), (z0, z1) = _plane(sc, s)
+        x, (y0, y1), (z0, z1) = start_plane(sc, s)
         pts = np.stack([np.full(n, x), rng.uniform(y0, y1, n), rng.uniform(z0, z1, n)], 1)
         if s["start_orientation"] == "forward":
             q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))

@@ -10,28 +10,28 @@ import shacc_jax
 from shacc_jax import program_cache
 
 
-def _evaluate(baked):
-    return jax.tree.map(np.asarray, shacc_jax.evaluate(baked))
+def evaluate(baked):
+    return jax.tree.map(np.asarray, shacc_jax.evaluate_cached(*shacc_jax.inputs(baked)))
 
 
 def test_exported_program_equals_plain_jit(shipped_bake, tmp_path):
-    previous = program_cache._DIR  # an earlier in-process `main()` may have set one
+    previous = program_cache.get_dir()  # an earlier in-process `main()` may have set one
     program_cache.set_dir(None)
-    plain = _evaluate(shipped_bake)
+    plain = evaluate(shipped_bake)
     program_cache.set_dir(tmp_path)
-    program_cache._LOADED.clear()
+    program_cache.forget_loaded()
     try:
-        first = _evaluate(shipped_bake)          # exports and stores
+        first = evaluate(shipped_bake)          # exports and stores
         (entry,) = tmp_path.glob("export-evaluate-*.bin")
-        program_cache._LOADED.clear()            # as a new process would
-        second = _evaluate(shipped_bake)         # deserialises
+        program_cache.forget_loaded()            # as a new process would
+        second = evaluate(shipped_bake)         # deserialises
         entry.write_bytes(b"damaged")
-        program_cache._LOADED.clear()
-        third = _evaluate(shipped_bake)          # rebuilt over the damaged entry
+        program_cache.forget_loaded()
+        third = evaluate(shipped_bake)          # rebuilt over the damaged entry
         assert entry.read_bytes() != b"damaged"
     finally:
         program_cache.set_dir(previous)
-        program_cache._LOADED.clear()
+        program_cache.forget_loaded()
     for other in (first, second, third):
         for a, b in zip(jax.tree.leaves(plain), jax.tree.leaves(other), strict=True):
             np.testing.assert_array_equal(a, b)
@@ -40,15 +40,15 @@ def test_exported_program_equals_plain_jit(shipped_bake, tmp_path):
 def test_new_shapes_make_a_new_entry(shipped_results, tmp_path):
     from geometry_precompute import bake
 
-    previous = program_cache._DIR
+    previous = program_cache.get_dir()
     program_cache.set_dir(tmp_path)
-    program_cache._LOADED.clear()
+    program_cache.forget_loaded()
     try:
-        shacc_jax.evaluate(bake(shipped_results[:2]))
-        shacc_jax.evaluate(bake(shipped_results[2:4]))  # same shapes: same entry
+        evaluate(bake(shipped_results[:2]))
+        evaluate(bake(shipped_results[2:4]))  # same shapes: same entry
         assert len(list(tmp_path.glob("export-*.bin"))) == 1
-        shacc_jax.evaluate(bake(shipped_results[:3]))   # three scenes: a new one
+        evaluate(bake(shipped_results[:3]))   # three scenes: a new one
         assert len(list(tmp_path.glob("export-*.bin"))) == 2
     finally:
         program_cache.set_dir(previous)
-        program_cache._LOADED.clear()
+        program_cache.forget_loaded()

@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from jax_layouts import meta_target, meta_target_yaw, meta_weights
 from scipy.spatial.transform import Rotation
 
+from geometry_precompute.bake import is_horizontal_approach
 from geometry_precompute.frames import frame_from_approach as cpu_frame
 from shacc_jax import quaternion as quat
-from shacc_jax.meta import meta_target, meta_target_yaw, meta_weights, yaw_directions, yaw_only
+from shacc_jax.meta import yaw_directions
 from shacc_jax.orientation import fixed_direction, frame_from_approach, task_orientation
 from shacc_jax.shapes import prepare_all
 from shacc_jax.types import Spaces
@@ -243,12 +245,17 @@ def test_meta_target_yaw_equals_markley_average(seed):
     assert worst < 1e-6, worst
 
 
-def test_yaw_only_needs_every_member_horizontal():
-    down = wxyz(Rotation.from_matrix(cpu_frame([0.0, 0.0, -1.0])))
-    side = wxyz(Rotation.from_matrix(cpu_frame([1.0, 0.0, 0.0])))
-    _, is_yaw = yaw_directions(jnp.asarray(np.stack([side, down, side])))
-    np.testing.assert_array_equal(np.asarray(is_yaw), [True, False, True])
-    mask = jnp.array([True, True, True])
-    assert not bool(yaw_only(mask, jnp.array([0, 0, 1]), is_yaw))
-    assert bool(yaw_only(mask, jnp.array([0, -1, 1]), is_yaw))  # the top grasp not clustered
-    assert bool(yaw_only(jnp.array([True, False, True]), jnp.array([0, 0, 0]), is_yaw))
+def test_horizontal_frames_are_told_apart_alike_on_both_halves():
+    """The bake's test (which decides the layout's meta formula) and the JAX half's
+    (which gives the closed form its directions) agree: side frames in every yaw are
+    horizontal approach frames, a top grasp and tilted frames are not."""
+    rng = np.random.default_rng(5)
+    quats = [wxyz(Rotation.from_matrix(cpu_frame([np.cos(a), np.sin(a), 0.0])))
+             for a in rng.uniform(-np.pi, np.pi, 20)]
+    quats += [wxyz(Rotation.from_matrix(cpu_frame([0.0, 0.0, -1.0]))),
+              wxyz(Rotation.from_matrix(cpu_frame([1.0, 0.0, 0.3])))]
+    quats.append(wxyz(Rotation.random(random_state=rng)))
+    with jax.enable_x64(True):
+        _, is_yaw = yaw_directions(jnp.asarray(np.stack(quats)))
+    assert np.asarray(is_yaw).tolist() == [True] * 20 + [False] * 3
+    assert [is_horizontal_approach(q) for q in quats] == [True] * 20 + [False] * 3

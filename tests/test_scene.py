@@ -196,15 +196,24 @@ def test_duplicate_ids():
 
 
 def test_interpenetrating_objects():
+    """Checked where the geometry is built (precompute), not when the file is parsed."""
+    from geometry_precompute import precompute
+
     d = base()
     d["objects"][1]["position"] = [0.05, 0.0, 0.0]  # bodies overlap by 3.5 cm
-    _expect(d, "position", "interpenetrates")
+    scene = scene_from_dict(d, "scene.toml")
+    with pytest.raises(InputError) as e:
+        precompute(scene)
+    assert "position" in e.value.field and "interpenetrates" in e.value.rule
+    assert str(e.value).startswith("scene.toml")
 
 
 def test_touching_objects_are_fine():
+    from geometry_precompute import precompute
+
     d = base()
     d["objects"][1]["position"] = [0.085, 0.0, 0.0]  # 0.045 + 0.040: touching
-    scene_from_dict(d)
+    precompute(scene_from_dict(d))
 
 
 def test_empty_scene():

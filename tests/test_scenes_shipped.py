@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from geometry_precompute import load_scene, random_scene, shipped_scene_paths
+from geometry_precompute.bodies import object_body
 from geometry_precompute.intersect import SpaceSet
-from geometry_precompute.templates import object_body
 
 
 def test_manual_set(shipped_results):

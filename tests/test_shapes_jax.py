@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import trimesh
+from jax_layouts import components_first
 from scipy.spatial.transform import Rotation
 
 from geometry_precompute.frames import quat_from_matrix
@@ -153,7 +154,7 @@ def test_component_form_matches_vectorised_form_and_layouts():
     reference = jax.jit(jax.vmap(lambda p: jax.vmap(vectorised, (0, None))(prepared, p)))(pts)
     np.testing.assert_allclose(per_point, reference, atol=2e-6)
     # components_first: tasks (T, 1, 1) against points (3, 2, P/2).
-    c = shapes.components_first(prepared)
+    c = components_first(prepared)
     c = jax.tree.map(lambda a: a[..., None, None], c)
     grid = pts.T.reshape(3, 2, -1)
     laid_out = shapes.prepared_sdf(c, grid)  # (T, 2, P/2)

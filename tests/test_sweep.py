@@ -86,6 +86,9 @@ def finished(tmp_path_factory):
 def test_tables_and_values(finished):
     cfg, out, _, summary = finished
     assert summary["status"] == "complete" and summary["precomputed"] == 3
+    # The two points differ only in v_max (a rollout setting): one group, evaluated with a
+    # points axis, so 3 chunks of one scene each, not 6.
+    assert summary["chunks"] == 3
     scenes = pd.read_parquet(out / "scenes.parquet")
     rollouts = pd.read_parquet(out / "rollouts.parquet")
     assert len(scenes) == 2 * 3 and len(rollouts) == 2 * 3 * 3 * 4 * 3
@@ -99,7 +102,7 @@ def test_tables_and_values(finished):
 
     scene = random_scene(5 + 1, "gaussian", 3, 3)
     r = precompute(scene, scene.settings(overrides={"v_max": 0.3, "start_grid": [2, 2]}))
-    ev = shacc_jax.evaluate(bake([r]))
+    ev = shacc_jax.evaluate(*shacc_jax.inputs(bake([r])))
     row = scenes[(scenes.point == 1) & (scenes.scene_index == 1)].iloc[0]
     for m, mode in enumerate(shacc_jax.MODES):
         assert row[f"{mode}.success"] == pytest.approx(float(ev.metrics.u_scene[0, m]))
@@ -136,6 +139,19 @@ def test_rollout_setting_reuses_the_cache(finished, tmp_path):
 def test_dry_run_counts(finished):
     info = dry_run(finished[0])
     assert info["points"] == 2 and info["scenes"] == 3 and info["rollouts"] == 216
+    assert info["chunks"] == 3
+
+
+def test_points_group_by_everything_but_rollout_settings(tmp_path):
+    from sweeps.runner import point_groups
+
+    cfg = load_config(write(tmp_path, CONFIG + "[[points]]\nshrink_step = 0.9\n"
+                            "[[points]]\ngripper.opening = 0.12\n"))
+    # v_max 0.15, v_max 0.3, shrink_step 0.9 (new geometry), the default with a wider grip
+    assert point_groups(cfg) == [(0, 1), (2,), (3,)]
+    with_search = load_config(write(tmp_path, CONFIG.replace(
+        'name = "tiny"', 'name = "tiny"\nmodes = ["shrinking", "optimized"]')))
+    assert point_groups(with_search) == [(0,), (1,)]
 
 
 def _sweep_cmd(config: Path, out: Path, cache: Path) -> list[str]:
@@ -163,7 +179,7 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
         time.sleep(0.1)
     assert process_group_members(proc.pid) == [], "worker processes outlived the sweep"
     done = sorted(p.name for p in (out / "parts").glob("scenes-*.parquet"))
-    assert 1 <= len(done) < 6 and not (out / "scenes.parquet").exists()
+    assert 1 <= len(done) < 3 and not (out / "scenes.parquet").exists()
     res = subprocess.run(_sweep_cmd(config, out, cache), env=env, capture_output=True,
                          text=True, timeout=600)
     assert res.returncode == 0, res.stderr
@@ -185,9 +201,19 @@ import shacc_jax
 assert len(jax.local_devices()) == 2, jax.local_devices()
 d = dict(np.load({str(tmp_path / 'b.npz')!r}))
 b = SimpleNamespace(**d, n_scenes=d["task_mask"].shape[0])
-one = jax.tree.map(np.asarray, shacc_jax.evaluate(b))
-two = shacc_jax.evaluate_on_devices(b, shacc_jax.MODES)
-mesh = shacc_jax.evaluate_sharded(b, shacc_jax.MODES)
+g, p, layout = shacc_jax.inputs(b)
+one = jax.tree.map(np.asarray, shacc_jax.evaluate(g, p, layout))
+two = shacc_jax.evaluate_on_devices(g, p, layout)
+mesh = shacc_jax.evaluate_sharded(g, p, layout)
+# Two sweep points (a points axis) spread over the devices: each point as its own call.
+p2 = jax.tree.map(lambda a: np.stack([np.asarray(a), np.asarray(a)]), p)
+p2 = p2._replace(v_max=p2.v_max * np.array([[1.0], [0.5]], p2.v_max.dtype))
+both = shacc_jax.evaluate_on_devices(g, p2, layout)
+half = jax.tree.map(lambda a: np.asarray(a)[1], p2)
+slow = jax.tree.map(np.asarray, shacc_jax.evaluate(g, half, layout))
+assert both.rollouts.outcome.shape == (2, *one.rollouts.outcome.shape)
+np.testing.assert_array_equal(both.rollouts.outcome[0], one.rollouts.outcome)
+np.testing.assert_array_equal(both.rollouts.outcome[1], slow.rollouts.outcome)
 for other in (two, mesh):
     for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(other)):
         if x.dtype.kind == "f":  # float32: another batch shape may round differently

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from geometry_precompute.metrics import entropic_clutteredness, mean_distance
+from geometry_precompute.spread import entropic_clutteredness, mean_distance
 
 
 def test_mean_distance_hand_computed():

@@ -1,0 +1,171 @@
+"""The bake's schema: every array that crosses from the CPU half to the JAX half,
+its shape and meaning, the integer codes inside them, and the static layout of a
+batch. Defined once here; the bake (``bake.py``) fills these fields and the JAX
+half (``shacc_jax.types``) builds its pytrees from the same lists. Plain Python:
+importing it imports neither JAX nor the mesh libraries.
+
+A batch is three things (STYLE patterns 3 and 4; gymnax keeps its ``EnvParams``
+apart from the state for the same reason):
+
+- **Geometry** (:data:`GEOMETRY`): the scenes' arrays, leading axis S. Fixed by the
+  precompute: spaces, clusters, orientation spaces, start poses, objects.
+- **Params** (:data:`PARAMS`): every rollout setting, one value per scene (S,). A
+  leading axis of sweep points, (P, S), evaluates P settings over one geometry in
+  one call. Leaves, so new values never recompile.
+- **Layout** (:class:`Layout`): hashable and static, computed once in NumPy by the
+  bake (``BakedScenes.layout``): padded sizes, the modes, which meta-target formula
+  the scenes need, whether the program checks collisions and has box slots, and the
+  lane scheduler's block sizes. It decides the compiled program, so a chunk's mix
+  of scenes changes it only through fields one can read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+# Modes and outcomes (SPEC sections 9, 10 and 17).
+MODES = ("baseline", "shrinking", "shacc")
+# The fourth mode: shacc's rules on the spaces the search found; it needs the search
+# first (shacc_jax.optimize), so ``shacc_jax.evaluate`` computes MODES only.
+OPTIMIZED = "optimized"
+ALL_MODES = (*MODES, OPTIMIZED)
+OUTCOMES = ("success", "wrong", "ambiguous", "timeout", "collision")
+SUCCESS, WRONG, AMBIGUOUS, TIMEOUT, COLLISION = range(5)
+INVALID = -1  # the rollout's intended task is a padded (masked) task
+
+# Shape kinds, for task spaces and for objects alike (objects are cylinders or boxes).
+KINDS = ("cylinder", "disk", "cone", "box")
+CYLINDER, DISK, CONE, BOX = range(4)
+KIND_CODES = {name: i for i, name in enumerate(KINDS)}
+# Orientation-space kinds (SPEC section 5).
+ORIENT_KINDS = ("fixed", "point_to_axis")
+FIXED, POINT_TO_AXIS = range(2)
+
+META_FORMULAS = ("yaw", "general", "both")
+MAX_PARAMS = 2  # shrinkable parameters of one template, at most (handle_grasp: L, alpha)
+
+
+class Field(NamedTuple):
+    name: str
+    shape: tuple  # axis names (S scenes, T tasks, N starts, O objects, ...) or sizes
+    dtype: str    # "bool", "int" or "float"
+    doc: str
+
+
+GEOMETRY = (
+    Field("task_mask", ("S", "T"), "bool", "True for a real task"),
+    Field("kind", ("S", "T"), "int", "shape kind (KINDS): cylinder, disk, cone"),
+    Field("center_init", ("S", "T", 3), "float", "initial space's centre (cone: apex)"),
+    Field("quat_init", ("S", "T", 4), "float", "initial space's rotation (w, x, y, z)"),
+    Field("dims_init", ("S", "T", 3), "float",
+          "cylinder/disk (r, h, 0); cone (L, alpha, 0); box half extents"),
+    Field("center_opt", ("S", "T", 3), "float", "the shrunk (optimised) space's centre"),
+    Field("quat_opt", ("S", "T", 4), "float", "its rotation"),
+    Field("dims_opt", ("S", "T", 3), "float", "its dims"),
+    Field("cluster", ("S", "T"), "int",
+          "meta-skill cluster label (0, 1, ... in task order) in clusters of >= 2, else -1"),
+    Field("yaw_meta", ("S",), "bool", "every cluster member's orientation space is a "
+          "horizontal approach frame (the meta target's closed form serves the scene)"),
+    Field("orient_kind", ("S", "T"), "int", "orientation kind (ORIENT_KINDS)"),
+    Field("orient_quat", ("S", "T", 4), "float",
+          "fixed orientation; for point-to-axis the one on the axis itself"),
+    Field("orient_axis", ("S", "T", 2), "float", "(x, y) of the vertical axis (point-to-axis)"),
+    Field("starts", ("S", "N", 7), "float", "start poses [x, y, z, qw, qx, qy, qz]"),
+    Field("obj_mask", ("S", "O"), "bool", "True for a real object"),
+    Field("obj_kind", ("S", "O"), "int", "object body kind (KINDS): cylinder or box"),
+    Field("obj_center", ("S", "O", 3), "float", "the object body's centre"),
+    Field("obj_quat", ("S", "O", 4), "float", "its rotation (w, x, y, z)"),
+    Field("obj_size", ("S", "O", 3), "float",
+          "MuJoCo geom size: cylinder (r, half height, 0), box half extents"),
+)
+
+PARAMS = (
+    Field("dt", ("S",), "float", "control period, s"),
+    Field("v_max", ("S",), "float", "speed, m/s"),
+    Field("omega_max", ("S",), "float", "largest rotation rate, rad/s"),
+    Field("activation_tol", ("S",), "float", "tau: activation tolerance, m"),
+    Field("max_steps", ("S",), "int", "steps before a timeout"),
+    Field("ambiguity_nearest", ("S",), "bool", "ambiguity = nearest (else fail)"),
+    Field("collision", ("S",), "bool", "collision = mjx: this scene's rollouts are checked"),
+    Field("gripper_finger_length", ("S",), "float", "gripper.finger_length, m"),
+    Field("gripper_finger_radius", ("S",), "float", "gripper.finger_radius, m"),
+    Field("gripper_opening", ("S",), "float", "gripper.opening, m"),
+    Field("gripper_palm_radius", ("S",), "float", "gripper.palm_radius, m"),
+)
+
+SEARCH = (
+    Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),
+    Field("q_min", ("S", "T", "P"), "float", "lower bound (0 where masked)"),
+    Field("q_init", ("S", "T", "P"), "float", "initial value (upper bound)"),
+    Field("q_shrunk", ("S", "T", "P"), "float", "Shrinking's value"),
+    Field("center_dq", ("S", "T", 3, "P"), "float",
+          "d centre / d q: centre(q) = center_init + center_dq (q - q_init)"),
+    Field("dims_dq", ("S", "T", 3, "P"), "float", "d dims / d q, the same way"),
+    Field("opt_starts", ("S", "No", 7), "float", "the search's own start poses"),
+    Field("opt_start_mask", ("S", "No"), "bool", "True for a real search start"),
+    Field("optimize_seed", ("S",), "int", "the search's seed"),
+    Field("optimize_population", ("S",), "int", "CMA-ES population (one value per batch)"),
+    Field("optimize_generations", ("S",), "int", "generations (one value per batch)"),
+)
+
+GRIPPER = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",
+           "gripper_palm_radius")
+
+
+def names(fields) -> tuple[str, ...]:
+    return tuple(f.name for f in fields)
+
+
+def per_task(fields) -> frozenset[str]:
+    """Fields whose second axis is the tasks (cut together when a batch is cut to
+    fewer tasks)."""
+    return frozenset(f.name for f in fields if f.shape[1:2] == ("T",))
+
+
+def lanes_per_block_default(backend: str) -> int:
+    """Lanes per block of the lane scheduler: large on accelerators (each block is one
+    sequence of kernel launches), small on CPU (less spread within a block)."""
+    return 1 << 17 if backend in ("gpu", "cuda", "rocm", "tpu") else 1 << 8
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The static side of a batch: everything that decides the compiled program.
+
+    ``n_tasks``, ``n_starts``, ``n_objects``: padded sizes (T, N, O). ``modes``: which
+    of MODES, in output order. ``meta_formula``: "yaw" when every scene's cluster
+    members have horizontal approach frames (Geometry.yaw_meta), "general" when no
+    scene's have, "both" otherwise (each kind of lane gets its own pass).
+    ``collision_checks``: whether the program checks gripper collisions (some scene's
+    ``collision`` param is on; scenes with it off are not checked). ``box_objects``:
+    whether the collision model needs box slots. ``lanes_per_block`` (None: the
+    backend's default, :func:`lanes_per_block_default`) and ``samples_per_block``: the
+    lane scheduler's block of lanes x samples (``shacc_jax.lanes``).
+    """
+
+    n_tasks: int
+    n_starts: int
+    n_objects: int
+    modes: tuple[str, ...] = MODES
+    meta_formula: str = "general"
+    collision_checks: bool = False
+    box_objects: bool = False
+    lanes_per_block: int | None = None
+    samples_per_block: int = 16
+
+    def __post_init__(self):
+        modes = tuple(self.modes)
+        object.__setattr__(self, "modes", modes)
+        bad = [m for m in modes if m not in MODES]
+        if bad or not modes or len(set(modes)) != len(modes):
+            raise ValueError(f"Layout.modes must be distinct names from {MODES}, got {modes}")
+        if self.meta_formula not in META_FORMULAS:
+            raise ValueError(f"Layout.meta_formula must be one of {META_FORMULAS}, got "
+                             f"{self.meta_formula!r}")
+        for name in ("n_tasks", "n_starts", "n_objects", "samples_per_block"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"Layout.{name} must be >= 1, got {getattr(self, name)}")
+        if self.lanes_per_block is not None and int(self.lanes_per_block) < 1:
+            raise ValueError(f"Layout.lanes_per_block must be >= 1 or None, got "
+                             f"{self.lanes_per_block}")
