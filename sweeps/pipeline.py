@@ -17,6 +17,7 @@ from geometry_precompute import (
     PrecomputeResult,
     bake,
 )
+from geometry_precompute.bake import GEOMETRY_FIELDS
 from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
 
 from . import memory
@@ -81,6 +82,10 @@ def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str]) -> list[
     optimized mode searches per bake (its search depends on the rollout settings)."""
     if len(bakes) == 1 or OPTIMIZED in modes:
         return [evaluate_baked(b, modes)[0] for b in bakes]
+    for b in bakes[1:]:  # a grouping error would evaluate one point on another's spaces
+        for name in GEOMETRY_FIELDS:
+            if not np.array_equal(getattr(b, name), getattr(bakes[0], name)):
+                raise RuntimeError(f"sweep points grouped together differ in {name}")
     ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), params=[
         shacc_jax.Params.from_bake(b) for b in bakes])
     return [jax.tree.map(lambda a, i=i: a[i], ev) for i in range(len(bakes))]
