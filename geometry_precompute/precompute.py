@@ -27,9 +27,10 @@ from .spread import entropic_clutteredness, mean_distance
 from .templates import TaskSpace, resolve_tasks
 
 # Part of every precompute cache key: raised when the same scene and settings would
-# give other answers (2: fast intersection volumes, issue 15), so that results cached
-# by an earlier version are computed again rather than mixed with new ones.
-PRECOMPUTE_VERSION = 2
+# give other answers (2: fast intersection volumes, issue 15; 3: 12 quadrature nodes per
+# cone x cylinder piece), so that results cached by an earlier version are computed
+# again rather than mixed with new ones.
+PRECOMPUTE_VERSION = 3
 
 
 @dataclass(frozen=True)

@@ -88,6 +88,16 @@ def test_cone_cylinder_against_fine_booleans(x, y, zc, yaw, r, h, length, alpha)
     assert vol[(0, 1)] == pytest.approx(boolean(cone, cyl), rel=2e-5, abs=1e-10)
 
 
+def test_cone_cylinder_with_breaks_close_together():
+    """The top edge's chord starts 0.5 mm before a corner crosses the circle: a branch
+    point just outside the next piece (found by hypothesis; 8 nodes erred by 2.5e-5)."""
+    cone = level_cone((0.0, 0.0, 0.08), 0.0, 0.25, 0.375)
+    cyl = upright((0.0625, 0.0625, 0.0), 0.0625, 0.125)
+    vol, _ = fast_volumes([cone, cyl], [(0, 1)])
+    # 4096-gon booleans give 1.2608646806e-05 (1024: ...6806, 2048: ...6805).
+    assert vol[(0, 1)] == pytest.approx(boolean(cone, cyl, 4096), rel=2e-6)
+
+
 def test_cone_cylinder_against_monte_carlo():
     cone = level_cone((0.0, -0.2, 0.05), math.pi / 2, 0.3, math.radians(30))
     cyl = upright((0.0, 0.05, 0.075), 0.2, 0.15)
