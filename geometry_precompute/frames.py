@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
@@ -40,7 +39,11 @@ def quat_of_approach(a) -> tuple[float, float, float, float]:
     return quat_of_rotation(_frame_rows(a))
 
 
-def _from_matrix(m: np.ndarray) -> Rotation:
+def _from_matrix(m: np.ndarray):
+    # scipy.spatial is imported on first use: it is a third of a second, and importing
+    # the package (as the JAX half does for the bake's schema) should not pay it.
+    from scipy.spatial.transform import Rotation
+
     # The matrices given here are rotations by construction; scipy's check of that
     # costs 5x the conversion and does not change the result (tests/test_precompute_fast.py).
     try:

@@ -20,7 +20,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .frames import frame_from_approach, quat_from_matrix
 from .scene import Scene
@@ -38,6 +37,8 @@ def _orientations(n: int, orientation: str, seed: int) -> np.ndarray:
     if orientation == "forward":
         q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
     else:
+        from scipy.spatial.transform import Rotation  # on first use (frames.py says why)
+
         q = quat_from_matrix(Rotation.random(n, rng=np.random.default_rng(seed)).as_matrix())
     q.flags.writeable = False
     return q
@@ -75,6 +76,8 @@ def _search_draws(n: int, orientation: str, seed: int) -> tuple[np.ndarray, ...]
     if orientation == "forward":
         q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
     else:
+        from scipy.spatial.transform import Rotation  # on first use (frames.py says why)
+
         q = quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())
     for a in (uy, uz, q):
         a.flags.writeable = False

@@ -31,6 +31,8 @@ from geometry_precompute.schema import (  # noqa: F401  (re-exported)
     Layout,
 )
 
+from .shapes import prepare_all
+
 
 class Spaces(NamedTuple):
     """One scene's position spaces (T tasks)."""
@@ -58,26 +60,22 @@ def _read(cls, baked, dtype=None):
     return cls(**out)
 
 
-class _GeometryMethods:
+class _FromBake:
     @classmethod
     def from_bake(cls, baked, dtype=None):
         return _read(cls, baked, dtype)
 
+
+class _GeometryMethods(_FromBake):
     def spaces(self, which: str):
         """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation
         matrices and cone trigonometry computed once): a ``shapes.Prepared`` over
         tasks."""
-        from .shapes import prepare_all
-
         return prepare_all(self.kind, getattr(self, f"center_{which}"),
                            getattr(self, f"quat_{which}"), getattr(self, f"dims_{which}"))
 
 
-class _ParamsMethods:
-    @classmethod
-    def from_bake(cls, baked, dtype=None):
-        return _read(cls, baked, dtype)
-
+class _ParamsMethods(_FromBake):
     def gripper(self) -> Float[Array, "... 4"]:
         """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
         return jnp.stack([getattr(self, k) for k in schema.GRIPPER], axis=-1)
@@ -94,7 +92,7 @@ Geometry = _pytree("Geometry", schema.GEOMETRY, _GeometryMethods,
 Params = _pytree("Params", schema.PARAMS, _ParamsMethods,
                  "Every rollout setting (schema.PARAMS): leaves of shape (S,), or (P, S) "
                  "for P sweep points over one geometry.")
-SearchProblem = _pytree("SearchProblem", schema.SEARCH, _ParamsMethods,
+SearchProblem = _pytree("SearchProblem", schema.SEARCH, _FromBake,
                         "What the optimized mode's search needs beyond Geometry and Params "
                         "(schema.SEARCH).")
 

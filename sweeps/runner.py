@@ -285,15 +285,17 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
     with precompute_pool(n_workers) as pool:
         for c in todo:
             t = time.perf_counter()
-            per_point = []
-            for i in c.points:
-                args = [(scenes[k], cfg.points[i], str(cache)) for k in c.scenes]
-                got = list(pool.map(precompute_cached, args,
-                                    chunksize=max(1, len(args) // 64)))
-                hits = sum(hit for _, hit in got)
-                hits_total += hits
-                computed += len(got) - hits
-                per_point.append([r for r, _ in got])
+            # A group's points share everything the precompute reads, so each scene is
+            # precomputed (or read from the cache) once, for the group's first point; the
+            # other points take that result with their own settings.
+            first = cfg.points[c.points[0]]
+            args = [(scenes[k], first, str(cache)) for k in c.scenes]
+            got = list(pool.map(precompute_cached, args, chunksize=max(1, len(args) // 64)))
+            hits = sum(hit for _, hit in got)
+            hits_total += hits
+            computed += len(got) - hits
+            per_point = [[replace(r, settings=r.scene.settings(DEFAULTS, cfg.points[i]))
+                          for r, _ in got] for i in c.points]
             t = lap("precompute", t)
             # One task count for every chunk, so chunks of a group share one compilation.
             bakes = [bake(results, max_tasks) for results in per_point]

@@ -204,7 +204,8 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     """The precompute workers' module imports nothing from JAX (spawned workers import
     the module of the task they are sent), and reading a scene file imports neither
     JAX nor coal, trimesh or manifold3d; the JAX half imports none of the mesh and
-    collision libraries."""
+    collision libraries, nor scipy.spatial (a third of a second, which the CPU half
+    imports where it uses it)."""
     import subprocess
     import sys
 
@@ -219,3 +220,7 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
             f"loaded = [m for m in {heavy}[1:] if m in sys.modules]\n"
             "assert not loaded, loaded\n")
     subprocess.run([sys.executable, "-c", code], check=True)
+    alone = ("import sys\nimport shacc_jax\n"
+             f"loaded = [m for m in {heavy}[1:] + ('scipy.spatial',) if m in sys.modules]\n"
+             "assert not loaded, loaded\n")
+    subprocess.run([sys.executable, "-c", alone], check=True)
