@@ -95,6 +95,22 @@ BakedScenes.__doc__ = """A bake: one NumPy array per schema field (GEOMETRY, PAR
 leading axis S, and ``labels`` for people (names, task ids, C values)."""
 
 
+def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> BakedScenes:
+    """Bakes of one shape (tasks, objects, starts) as one, scenes in order; ``pad_to``:
+    that many scenes, the last repeated (a padded scene's results are dropped by who
+    asked for it)."""
+    arrays = {k: np.concatenate([getattr(b, k) for b in bakes])
+              for k in GEOMETRY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS}
+    S = len(arrays["task_mask"])
+    if pad_to is not None and pad_to > S:
+        arrays = {k: np.concatenate([a, np.repeat(a[-1:], pad_to - S, axis=0)])
+                  for k, a in arrays.items()}
+    labels = {k: [x for b in bakes for x in b.labels[k]] for k in ("names", "task_ids")}
+    labels.update({k: np.concatenate([b.labels[k] for b in bakes])
+                   for k in ("C_init", "C_final")})
+    return BakedScenes(**arrays, labels=labels)
+
+
 def is_horizontal_approach(q) -> bool:
     """Whether orientation ``q`` is a horizontal approach frame: q = (cos psi/2, 0, 0,
     sin psi/2) * q_forward, i.e. the x and y parts of q * conj(q_forward) vanish to 64
@@ -175,9 +191,11 @@ def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
 
 
 def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
-         starts: np.ndarray | None = None) -> BakedScenes:
+         starts: np.ndarray | None = None, max_objects: int | None = None) -> BakedScenes:
     """Bake precomputed scenes; ``starts`` (N, 7) or (S, N, 7) overrides the
-    settings' start grid (quaternions are validated and normalised)."""
+    settings' start grid (quaternions are validated and normalised). ``max_tasks`` and
+    ``max_objects`` pad the task and object axes to at least that size (a sweep's
+    chunks share their shapes so)."""
     if not results:
         raise InputError("<bake>", "results", "needs at least one precomputed scene")
     n_max = max(len(r.spaces) for r in results)
@@ -223,7 +241,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params["max_steps"] = np.zeros(S, np.int32)
     params["ambiguity_nearest"] = np.zeros(S, bool)
     params["collision"] = np.zeros(S, bool)
-    O = max(1, max(len(r.scene.objects) for r in results))
+    O = max(1, max(len(r.scene.objects) for r in results), max_objects or 0)
     out["obj_mask"] = np.zeros((S, O), bool)
     out["obj_kind"] = np.zeros((S, O), np.int32)
     out["obj_center"] = np.zeros((S, O, 3))

@@ -17,3 +17,7 @@ class InputError(ValueError):
         self.field = field
         self.rule = rule
         super().__init__(f"{self.source}: {field}: {rule}")
+
+    def __reduce__(self):
+        # Raised in a worker process, it travels back to the command whole.
+        return (type(self), (self.source, self.field, self.rule))

@@ -2,7 +2,7 @@
 # # Does clutteredness predict failure?
 #
 # From a `shacc reproduce` output (the one in `docs/reproduce` by default) or a sweep's
-# `scenes.parquet` (set SHACC_SWEEP to its folder; its first point is used), baseline
+# `scenes` dataset (set SHACC_SWEEP to its folder; its first point is used), baseline
 # success u_scene is plotted against the three scene measures, C (task-space overlap),
 # d (object spread) and h (entropic clutteredness), with least-squares lines and Pearson's
 # rho with 95 % bootstrap CIs (the paper's Fig. 6a). The scenes furthest from the line
@@ -23,7 +23,7 @@ if os.environ.get("SHACC_SWEEP"):
 
     from sweeps.stats import pearson_ci
 
-    table = pd.read_parquet(Path(os.environ["SHACC_SWEEP"]) / "scenes.parquet")
+    table = pd.read_parquet(Path(os.environ["SHACC_SWEEP"]) / "scenes")
     table = table[table.point == table.point.min()]
     scenes = [{"name": row.scene, "C_init": row.C_init, "d": row.d, "h": row.h,
                "baseline": {"u_scene": row["baseline.success"]}} for _, row in table.iterrows()]

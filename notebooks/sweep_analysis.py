@@ -40,8 +40,8 @@ ambiguity = ["fail", "nearest"]
     run_sweep(load_config(tmp / "small.toml"), tmp / "out", tmp / "cache", workers=1,
               progress=False)
     SWEEP = tmp / "out"
-scenes = pd.read_parquet(Path(SWEEP) / "scenes.parquet")
-rollouts = pd.read_parquet(Path(SWEEP) / "rollouts.parquet")
+scenes = pd.read_parquet(Path(SWEEP) / "scenes")
+rollouts = pd.read_parquet(Path(SWEEP) / "rollouts")
 axes = [c[4:] for c in scenes.columns if c.startswith("set.") and scenes[c].nunique() > 1]
 modes = [c.split(".")[0] for c in scenes.columns if c.endswith(".success")]
 print(len(scenes), "scene rows,", len(rollouts), "rollouts; swept:", axes)

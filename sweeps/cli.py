@@ -139,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--cache", help="precompute cache folder (default ~/.cache/shacc/precompute)")
     c.add_argument("--workers", type=_int_in(1, 1024), default=None,
                    help="precompute processes (default: one per CPU)")
+    c.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786) instead of "
+                   "a local one; overrides the config's scheduler")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func="runner:cmd_sweep")
 
@@ -178,7 +181,9 @@ _default_showwarning = warnings.showwarning
 def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
-    if args.command in ("evaluate", "optimize", "reproduce", "sweep", "render"):
+    # The sweep's evaluation workers turn the cache on for themselves; its client
+    # process never loads JAX.
+    if args.command in ("evaluate", "optimize", "reproduce", "render"):
         compile_cache.enable()
     module, name = args.func.split(":")
     try:

@@ -4,6 +4,7 @@ over any setting of SPEC section 16, validated in full before any work starts.
     name = "speed"
     modes = ["baseline", "shrinking", "shacc"]   # optional, default all three
     chunk = 32                                   # optional: scenes per saved chunk
+    scheduler = "tcp://10.0.0.5:8786"            # optional: an existing Dask cluster
 
     [source]                                     # the random generator ...
     kind = "random"
@@ -41,13 +42,12 @@ from typing import Any
 
 import numpy as np
 
-import shacc_jax
-from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene
+from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
 from geometry_precompute.generate import MAX_TASKS
 from geometry_precompute.scene import Scene, read_toml, scene_to_dict
 from geometry_precompute.settings import flatten_settings
 
-_TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points"}
+_TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}
 _RANDOM = {"kind", "count", "tasks", "sampling", "seed"}
 MAX_COUNT = 100_000_000  # random scenes in one sweep
 _FILES = {"kind", "path"}
@@ -61,17 +61,34 @@ class SweepConfig:
     source: dict
     points: list[dict]
     base_dir: Path
+    scheduler: str | None = None  # where it runs; not part of the results (nor the hash)
 
     def scenes(self) -> list[Scene]:
         src = self.source
         if src["kind"] == "files":
             folder = self.base_dir / src["path"]
             return [load_scene(p) for p in sorted(folder.glob("*.toml"))]
+        return [random_scene(*self.random_ref(i)) for i in range(src["count"])]
+
+    def random_ref(self, i: int) -> tuple[int, str, int, int]:
+        """``random_scene``'s arguments for scene ``i`` of a random source: scenes are
+        built where they are precomputed, from these few numbers."""
+        src = self.source
         kinds = {"uniform": ["uniform"], "gaussian": ["gaussian"],
                  "both": ["uniform", "gaussian"]}[src["sampling"]]
-        lo, hi = src["tasks"]
-        return [random_scene(src["seed"] + i, kinds[i % len(kinds)], lo, hi)
-                for i in range(src["count"])]
+        return (src["seed"] + i, kinds[i % len(kinds)], *src["tasks"])
+
+    def n_scenes(self) -> int:
+        src = self.source
+        return src["count"] if src["kind"] == "random" else \
+            len(list((self.base_dir / src["path"]).glob("*.toml")))
+
+    def max_tasks(self) -> int:
+        """The most tasks (and objects) a scene of the source can have: a random
+        source's upper bound, or the largest scene file's count."""
+        if self.source["kind"] == "random":
+            return self.source["tasks"][1]
+        return max(max(len(s.tasks), len(s.objects)) for s in self.scenes())
 
     def task_counts(self) -> list[int]:
         """Task count of every scene, in order. Random scenes are not built: their task
@@ -129,10 +146,10 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     name = data.get("name", Path(src).stem)
     if not isinstance(name, str) or not name:
         raise InputError(src, "name", "must be a non-empty string")
-    modes = data.get("modes", list(shacc_jax.MODES))
+    modes = data.get("modes", list(schema.MODES))
     if not isinstance(modes, list) or not modes \
-            or any(m not in shacc_jax.ALL_MODES for m in modes) or len(set(modes)) != len(modes):
-        raise InputError(src, "modes", f"must be distinct names from {list(shacc_jax.ALL_MODES)}")
+            or any(m not in schema.ALL_MODES for m in modes) or len(set(modes)) != len(modes):
+        raise InputError(src, "modes", f"must be distinct names from {list(schema.ALL_MODES)}")
     chunk = _int(data.get("chunk", 32), src, "chunk", 1)
     raw = data.get("source")
     if not isinstance(raw, Mapping) or "kind" not in raw:
@@ -192,12 +209,20 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         points = [{}]
     # The fixed settings hold for every point; a point's own value of one wins.
     points = [{**fixed, **p} for p in points]
-    cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir)
+    scheduler = data.get("scheduler")
+    if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
+        raise InputError(src, "scheduler", "must be a Dask scheduler address such as "
+                         f"\"tcp://10.0.0.5:8786\", got {scheduler!r}")
+    cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir, scheduler)
     if source_out["kind"] == "files":
         # Scene files are loaded (and validated) before any work starts, and each point
         # against each scene's own [settings]. Random scenes have no [settings] of their
         # own, so the points' checks above cover them without building any.
         scenes = cfg.scenes()
+        from geometry_precompute.bodies import check_bodies_apart
+
+        for scene in scenes:  # the rest of SPEC section 13: here, not in a worker mid-sweep
+            check_bodies_apart(scene)
         for k, p in enumerate(points):
             grids = {tuple(s.settings(DEFAULTS, p)["start_grid"]): s.source for s in scenes}
             if len(grids) > 1:

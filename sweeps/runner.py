@@ -1,23 +1,20 @@
-"""The sweep runner (SPEC section 12): precompute on CPU in worker processes with a
-disk cache, evaluate on the accelerator in chunks spread over the local devices,
-write Parquet, and resume after any interruption.
+"""The sweep runner (SPEC section 12): a streaming pipeline on Dask distributed.
 
-Work is a list of chunks, each of one group of sweep points and up to ``chunk``
-scenes, in a fixed order. Points that differ only in rollout settings (the schema's
-Params: speeds, tolerances, collisions, gripper sizes) share their geometry, so they
-form one group and are evaluated in one call, with a points axis on Params (the
-optimized mode's search depends on them: with it, each point is its own group). A
-finished chunk is two Parquet files in ``OUT/parts/``, each written to a temporary
-name and renamed, the per-rollout part first: a chunk counts as done when its
-per-scene part exists, so a run killed at any moment (SIGKILL included) leaves only
-whole chunks (and perhaps a temporary file, which the rerun deletes), and the rerun
-redoes the unfinished ones. When every chunk is done, the parts are joined into
-``OUT/scenes.parquet`` and ``OUT/rollouts.parquet`` (also atomically); a rerun of a
-finished sweep does nothing.
+The chunk plan (``plan``) comes from the config alone. For every chunk not yet
+written, the client submits its precompute tasks (``workers.precompute_batch``, on
+the CPU workers, each scene built and precomputed where it runs, cached per host)
+and one evaluation task that depends on them (``evaluation_worker.evaluate_chunk``,
+on an evaluation worker), keeping a bounded number of chunks in flight: while one
+chunk is evaluated, later scenes are being precomputed, and memory on the client and
+on each worker stays bounded by the chunk size whatever the sweep's size. Each
+evaluation returns its two Parquet parts as bytes; the client alone writes ``OUT``.
 
-The precompute cache (``--cache``, default ``~/.cache/shacc/precompute``) stores one
-pickle per (scene, precompute-stage settings) hash, so a rollout setting never
-triggers a new precompute and overlapping sweeps share results.
+A chunk's parts are written atomically, the rollouts part first, and a chunk counts
+as done when its scenes part exists: a run killed at any moment (SIGKILL included)
+leaves whole chunks only (and perhaps a temporary file, which the rerun deletes),
+and the rerun does the rest. A worker lost mid-task is replaced and its task rerun
+by Dask; the tables are those of an uninterrupted run. A rerun of a finished sweep
+does nothing.
 """
 
 from __future__ import annotations
@@ -28,25 +25,19 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, replace
+import uuid
+from dataclasses import replace
 from pathlib import Path
 
-import jax
 import numpy as np
-import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 from tqdm import tqdm
 
-from geometry_precompute import DEFAULTS, SPECS, InputError, bake
-from geometry_precompute.scene import Scene
-from shacc_jax.types import OPTIMIZED, OUTCOMES
+from geometry_precompute import DEFAULTS, InputError
 
-from . import memory
+from . import tables
 from .config import SweepConfig
 from .output import check_output_dir, write_atomic, write_json
-from .pipeline import evaluate_points
-from .workers import precompute_cached, precompute_pool
+from .plan import Chunk, bucket, plan, point_groups, precompute_batches, shapes
 
 # For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
 # second (random 10-task scenes: 2 CPU cores 1.4e5, one H100 9.2e7); precompute per task
@@ -64,101 +55,8 @@ DRY_RUN_EXACT = 100_000
 
 
 # What a sweep writes into its output folder; a folder holding anything else is refused.
-SWEEP_FILES = ("config.json", "parts", "scenes.parquet", "rollouts.parquet", ".*.tmp", ".lock")
-
-
-def default_cache() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "shacc" / "precompute"
-
-
-@dataclass(frozen=True)
-class Chunk:
-    index: int
-    points: tuple[int, ...]
-    scenes: tuple[int, ...]
-
-
-def point_groups(cfg: SweepConfig) -> list[tuple[int, ...]]:
-    """The sweep's points grouped by everything but their rollout settings (in the order
-    of each group's first point); one point per group when the optimized mode runs."""
-    groups: dict[str, list[int]] = {}
-    for i, point in enumerate(cfg.points):
-        shared = {k: v for k, v in point.items() if SPECS[k].stage != "rollout"}
-        key = json.dumps(shared, sort_keys=True, default=str) if OPTIMIZED not in cfg.modes \
-            else str(i)
-        groups.setdefault(key, []).append(i)
-    return [tuple(g) for g in groups.values()]
-
-
-def plan(cfg: SweepConfig, n_scenes: int, chunk: int) -> list[Chunk]:
-    out = []
-    for points in point_groups(cfg):
-        for start in range(0, n_scenes, chunk):
-            out.append(Chunk(len(out), points,
-                             tuple(range(start, min(start + chunk, n_scenes)))))
-    return out
-
-
-def _chunk_size(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
-    """Scenes per chunk: the config's, lowered if the memory budget is short (a chunk of
-    one scene that still does not fit is evaluated in pieces of its start grid)."""
-    per_scene = _bytes_per_scene(cfg, scenes, n_starts) * len(jax.local_devices()) * \
-        max(len(g) for g in point_groups(cfg))
-    return max(1, min(cfg.chunk, memory.budget() // per_scene))
-
-
-def _bytes_per_scene(cfg: SweepConfig, scenes: list[Scene], n_starts: int) -> int:
-    return memory.BYTES_PER_ROLLOUT * n_starts * max(len(s.tasks) for s in scenes) * len(cfg.modes)
-
-
-def _max_starts(cfg: SweepConfig, scenes: list[Scene]) -> int:
-    """The largest start grid over the sweep's points."""
-    return max(int(np.prod(scenes[0].settings(DEFAULTS, p)["start_grid"])) for p in cfg.points)
-
-
-def _tables(cfg: SweepConfig, chunk: Chunk, point_index: int, results, ev
-            ) -> tuple[pd.DataFrame, ...]:
-    """The per-scene and per-rollout rows of one point of a chunk (``ev``: that point's
-    evaluation)."""
-    point = cfg.points[point_index]
-    ro, me = ev.rollouts, ev.metrics
-    rows = []
-    for i, (si, r) in enumerate(zip(chunk.scenes, results, strict=True)):
-        row = {"point": point_index, **{f"set.{k}": str(v) for k, v in point.items()},
-               "scene_index": si, "scene": r.scene.name, "n_tasks": len(r.spaces),
-               "C_init": r.C_init, "C_final": r.C_final, "d": r.d, "h": r.h}
-        for m, mode in enumerate(cfg.modes):
-            dr = me.delta_R_mean[i, m]
-            row[f"{mode}.success"] = float(me.u_scene[i, m])
-            row[f"{mode}.delta_R_mean"] = float(dr) if np.isfinite(dr) else np.nan
-            for o, name in enumerate(OUTCOMES):
-                row[f"{mode}.n_{name}"] = int(me.outcome_counts[i, m, o])
-        rows.append(row)
-    scenes_df = pd.DataFrame(rows)
-    S, M, N, T = ro.outcome.shape
-    s_i, m_i, n_i, t_i = np.meshgrid(np.arange(S), np.arange(M), np.arange(N), np.arange(T),
-                                     indexing="ij")
-    valid = ro.outcome >= 0
-    outcome_names = np.array(OUTCOMES)
-    rollouts_df = pd.DataFrame({
-        "point": np.full(valid.sum(), point_index, np.int32),
-        "scene_index": np.asarray(chunk.scenes)[s_i[valid]].astype(np.int32),
-        "mode": pd.Categorical(np.array(cfg.modes)[m_i[valid]], categories=list(cfg.modes)),
-        "start": n_i[valid].astype(np.int32),
-        "task": t_i[valid].astype(np.int16),
-        "outcome": pd.Categorical(outcome_names[ro.outcome[valid]], categories=list(OUTCOMES)),
-        "activated": ro.activated[valid].astype(np.int16),
-        "steps": ro.step[valid].astype(np.int32),
-        "delta_R": ro.delta_R[valid].astype(np.float32),
-    })
-    return scenes_df, rollouts_df
-
-
-def _write_parquet(path: Path, table: pa.Table) -> None:
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    write_atomic(path, sink.getvalue().to_pybytes())
+SWEEP_FILES = ("config.json", "scenes", "rollouts", ".*.tmp", ".lock")
+TABLES = ("scenes", "rollouts")
 
 
 def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
@@ -181,38 +79,52 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
     # serves the rest; a warm cache makes this part smaller than estimated).
     stages = {json.dumps(DEFAULTS.with_overrides(p).by_stage("precompute"), sort_keys=True,
                          default=str) for p in cfg.points}
+    from . import memory
+    from .cluster import local_gpus
+
     n_workers = workers or os.cpu_count() or 1
-    platform = "gpu" if jax.default_backend() in ("gpu", "cuda", "rocm") else "cpu"
+    gpus = local_gpus()
+    platform = "gpu" if gpus else "cpu"
     chunk = max(1, min(cfg.chunk, n))
-    shapes = len({tuple(g) for g in grids}) * (1 if n % chunk == 0 else 2)
+    # One program per start grid and group size (the chunks are padded to one shape);
+    # none when the persistent cache holds them.
+    programs = len({(tuple(g), len(grp)) for grp in point_groups(cfg)
+                    for g in (grids[i] for i in grp)})
     n_chunks = len(point_groups(cfg)) * -(-n // chunk)
     est = {
         "precompute": len(stages) * tasks_total * PRECOMPUTE_S_PER_TASK / n_workers
         + WORKER_START_S,
-        "compile": shapes * COMPILE_S,
+        "compile": programs * COMPILE_S,
         "rollouts": rollouts / RATES[platform],
         "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
     }
     per_chunk = memory.BYTES_PER_ROLLOUT * int(max(np.prod(g) for g in grids)) * max_tasks * \
-        len(cfg.modes) * chunk * max(len(g) for g in point_groups(cfg))
+        len(cfg.modes) * bucket(chunk) * max(len(g) for g in point_groups(cfg))
     return {"points": len(cfg.points), "scenes": n, "scene_evaluations": len(cfg.points) * n,
             "rollouts": int(rollouts), "chunks": n_chunks, "chunk_scenes": chunk,
             "estimated_memory_per_chunk_MB": per_chunk / 2**20,
-            "devices": [str(d) for d in jax.local_devices()], "precompute_workers": n_workers,
+            "evaluation_workers": [f"gpu {g}" for g in gpus] or ["cpu"],
+            "precompute_workers": n_workers,
             "estimated_seconds": {k: round(v, 2) for k, v in est.items()},
             "estimated_total_seconds": round(sum(est.values()), 1),
             "rate_assumed_per_s": RATES[platform]}
 
 
 def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
-              workers: int | None = None, progress: bool = True) -> dict:
-    cache = Path(cache or default_cache())
+              workers: int | None = None, progress: bool = True,
+              scheduler: str | None = None) -> dict:
+    """Run (or resume) a sweep into ``out``. ``cache``: the precompute cache folder, the
+    same path on every worker host (default: each host's ``~/.cache/shacc/precompute``);
+    ``workers``: precompute processes of the local cluster (default: one per core);
+    ``scheduler``: an existing Dask cluster's address (default: the config's
+    ``scheduler``, else a local cluster)."""
     check_output_dir(out, "--out", SWEEP_FILES)
-    check_output_dir(cache, "--cache", ("*",))
+    if cache is not None:
+        check_output_dir(cache, "--cache", ("*",))
+        cache.mkdir(parents=True, exist_ok=True)
     out.mkdir(parents=True, exist_ok=True)
-    cache.mkdir(parents=True, exist_ok=True)
     with folder_lock(out):
-        return _run_locked(cfg, out, cache, workers, progress)
+        return _run_locked(cfg, out, cache, workers, progress, scheduler or cfg.scheduler)
 
 
 @contextlib.contextmanager
@@ -236,9 +148,7 @@ def folder_lock(out: Path):
         os.close(fd)
 
 
-def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
-                progress: bool) -> dict:
-    h = cfg.hash()
+def _check_marker(out: Path, cfg: SweepConfig, h: str) -> None:
     marker = out / "config.json"
     if marker.exists():
         try:
@@ -253,79 +163,188 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path, workers: int | None,
                              f"{previous.get('hash')}, this config {h}); use a new --out")
     else:
         write_json(marker, {"hash": h, "config": cfg.resolved()})
-    final_s, final_r = out / "scenes.parquet", out / "rollouts.parquet"
-    scenes = cfg.scenes()
-    chunk_n = _chunk_size(cfg, scenes, _max_starts(cfg, scenes))
-    chunks = plan(cfg, len(scenes), chunk_n)
-    max_tasks = max(len(s.tasks) for s in scenes)
-    parts = out / "parts"
-    parts.mkdir(exist_ok=True)
+
+
+def _setting_names(cfg: SweepConfig) -> tuple[str, ...]:
+    """Every setting any point sets, in order of first appearance."""
+    return tuple(dict.fromkeys(k for p in cfg.points for k in p))
+
+
+def _rollouts_per_scene(cfg: SweepConfig, files) -> list[float]:
+    """Per sweep point, the rollouts of one scene (a random source: of its mean task
+    count), for the progress bar's total."""
+    if files is not None:
+        tasks = float(np.mean([len(s.tasks) for s in files]))
+        grids = [files[0].settings(DEFAULTS, p)["start_grid"] for p in cfg.points]
+    else:
+        tasks = sum(cfg.source["tasks"]) / 2
+        grids = [DEFAULTS.with_overrides(p)["start_grid"] for p in cfg.points]
+    return [tasks * int(np.prod(g)) * len(cfg.modes) for g in grids]
+
+
+def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | None,
+                progress: bool, scheduler: str | None) -> dict:
+    t0 = time.perf_counter()
+    h = cfg.hash()  # scene files are loaded and checked here, before any work
+    _check_marker(out, cfg, h)
+    chunks = plan(cfg)
+    for name in TABLES:
+        (out / name).mkdir(exist_ok=True)
     # A run killed in the middle of a write leaves its temporary file (output.write_atomic);
     # only this sweep writes into OUT, so any there now is such a leftover.
-    for stale in [*out.glob(".*.tmp"), *parts.glob(".*.tmp")]:
+    for stale in [*out.glob(".*.tmp"), *(out / "scenes").glob(".*.tmp"),
+                  *(out / "rollouts").glob(".*.tmp")]:
         stale.unlink(missing_ok=True)
-    todo = [c for c in chunks if not (parts / f"scenes-{c.index:06d}.parquet").exists()]
+    todo = [c for c in chunks if not tables.part_path(out, "scenes", c.index).exists()]
     summary = {"hash": h, "chunks": len(chunks), "done_before": len(chunks) - len(todo)}
-    if not todo and final_s.exists() and final_r.exists():
+    if not todo:
         summary["status"] = "nothing to do: the sweep is complete"
         return summary
-    t0 = time.perf_counter()
-    n_rollouts = hits_total = computed = 0
-    # Where the time goes, summed over chunks (reported in the summary).
-    stage = dict.fromkeys(("precompute", "bake", "evaluate", "tables", "write"), 0.0)
+    files = cfg.scenes() if cfg.source["kind"] == "files" else None
+    from .cluster import connect
 
-    def lap(name: str, since: float) -> float:
-        now = time.perf_counter()
-        stage[name] += now - since
-        return now
-
-    bar = tqdm(total=len(chunks), initial=len(chunks) - len(todo), unit="chunk",
-               disable=None if progress else True, file=sys.stderr, desc=cfg.name)
-    n_workers = workers or os.cpu_count() or 1
-    with precompute_pool(n_workers) as pool:
-        for c in todo:
-            t = time.perf_counter()
-            # A group's points share everything the precompute reads, so each scene is
-            # precomputed (or read from the cache) once, for the group's first point; the
-            # other points take that result with their own settings.
-            first = cfg.points[c.points[0]]
-            args = [(scenes[k], first, str(cache)) for k in c.scenes]
-            got = list(pool.map(precompute_cached, args, chunksize=max(1, len(args) // 64)))
-            hits = sum(hit for _, hit in got)
-            hits_total += hits
-            computed += len(got) - hits
-            per_point = [[replace(r, settings=r.scene.settings(DEFAULTS, cfg.points[i]))
-                          for r, _ in got] for i in c.points]
-            t = lap("precompute", t)
-            # One task count for every chunk, so chunks of a group share one compilation.
-            bakes = [bake(results, max_tasks) for results in per_point]
-            t = lap("bake", t)
-            evs = evaluate_points(bakes, cfg.modes)
-            t = lap("evaluate", t)
-            tables = [_tables(cfg, c, i, results, ev)
-                      for i, results, ev in zip(c.points, per_point, evs, strict=True)]
-            scenes_df = pd.concat([a for a, _ in tables], ignore_index=True)
-            rollouts_df = pd.concat([b for _, b in tables], ignore_index=True)
-            t = lap("tables", t)
-            for name, df in (("rollouts", rollouts_df), ("scenes", scenes_df)):  # this order
-                _write_parquet(parts / f"{name}-{c.index:06d}.parquet",
-                               pa.Table.from_pandas(df, preserve_index=False))
-            lap("write", t)
-            n_rollouts += len(rollouts_df)
-            rate = n_rollouts / (time.perf_counter() - t0)
-            bar.set_postfix(rollouts=n_rollouts, rate=f"{rate:.3g}/s", cache_hits=hits)
-            bar.update(1)
-    bar.close()
-    for name, final in (("scenes", final_s), ("rollouts", final_r)):
-        files = [parts / f"{name}-{c.index:06d}.parquet" for c in chunks]
-        _write_parquet(final, pa.concat_tables([pq.read_table(f) for f in files],
-                                               promote_options="default"))
-    summary.update({"status": "complete", "rollouts_this_run": n_rollouts,
-                    "precompute_cache_hits": hits_total, "precomputed": computed,
-                    "seconds": time.perf_counter() - t0,
-                    "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
-                    "precompute_workers": n_workers})
+    # When each phase ended, in seconds since the start (the client's wall clock).
+    phases = {"config": time.perf_counter() - t0}
+    with connect(scheduler, workers) as pool:
+        phases["cluster"] = time.perf_counter() - t0
+        if progress and pool.dashboard:
+            print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
+        counts = _stream(cfg, out, todo, files, pool, cache, progress)
+        phases["stream"] = time.perf_counter() - t0
+        summary.update(counts)
+        summary.update({"precompute_workers": pool.precompute_threads,
+                        "evaluation_workers": pool.evaluate_workers,
+                        "scheduler": scheduler or "local"})
+    phases["closed"] = time.perf_counter() - t0
+    summary["status"] = "complete"
+    summary["phases"] = {k: round(v, 3) for k, v in phases.items()}
+    summary["seconds"] = round(time.perf_counter() - t0, 3)
     return summary
+
+
+def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
+            progress: bool) -> dict:
+    """Submit the chunks of ``todo`` with a bounded number in flight, and write each as its
+    evaluation comes back. Returns the counts and busy times for the summary."""
+    from distributed import as_completed
+
+    from . import evaluation_worker
+    from .evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk
+    from .workers import precompute_batch
+
+    client = pool.client
+    run = uuid.uuid4().hex[:8]  # task keys of this run, apart from any earlier run's
+    shp = shapes(cfg)
+    names = _setting_names(cfg)
+    cache_arg = None if cache is None else str(cache)
+    per_scene = _rollouts_per_scene(cfg, files)
+    # In flight: two chunks per evaluation worker, or enough scenes to keep every
+    # precompute thread busy for a while if chunks are small; never more, whatever the
+    # sweep's size.
+    cap = max(2 * len(todo[0].scenes) * pool.evaluate_workers, 8 * pool.precompute_threads)
+    busy = dict.fromkeys(("precompute", "warm_up", "join", "evaluate", "tables", "write"),
+                         0.0)
+    totals = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
+              "compilations": 0, "programs_loaded": 0}
+    bar_opts = {"disable": None if progress else True, "file": sys.stderr, "smoothing": 0.1}
+    scenes_bar = tqdm(total=sum(len(c.scenes) for c in todo), unit="scene",
+                      desc="precompute", **bar_opts)
+    rollouts_bar = tqdm(total=int(sum(len(c.scenes) * sum(per_scene[i] for i in c.points)
+                                      for c in todo)),
+                        unit="rollout", unit_scale=True, desc="evaluate", **bar_opts)
+    waiting = iter(todo)
+    flying: dict[str, tuple[Chunk, list]] = {}  # evaluation key -> chunk, its tasks
+    batch_size: dict[str, int] = {}
+    done = as_completed()
+
+    def submit(c: Chunk) -> None:
+        points = [cfg.points[i] for i in c.points]
+        batches = []
+        for b, part in enumerate(precompute_batches(c.scenes, pool.precompute_threads)):
+            refs = [files[i] for i in part] if files is not None else \
+                [cfg.random_ref(i) for i in part]
+            f = client.submit(precompute_batch, refs, points, cache_arg, shp.tasks, shp.objects,
+                              key=f"precompute-{run}-{c.index}-{b}", priority=-c.index,
+                              resources=pool.precompute, pure=False)
+            batch_size[f.key] = len(part)
+            batches.append(f)
+            done.add(f)
+        job = ChunkJob(c, tuple(points), cfg.modes, shp, names)
+        ev = client.submit(evaluate_chunk, job, *batches, key=f"evaluate-{run}-{c.index}",
+                           priority=-c.index, resources=pool.evaluate, pure=False)
+        enc = client.submit(encode_chunk, job, ev, key=f"encode-{run}-{c.index}",
+                            priority=1_000_000 - c.index, resources=pool.precompute,
+                            pure=False)
+        flying[enc.key] = (c, [*batches, ev, enc])
+        done.add(enc)
+
+    def fill() -> None:
+        while True:
+            in_flight = sum(len(c.scenes) for c, _ in flying.values())
+            if flying and in_flight >= cap:
+                return
+            c = next(waiting, None)
+            if c is None:
+                return
+            submit(c)
+
+    def warm_up() -> None:
+        """Each evaluation worker compiles (or loads) the first chunk's program while the
+        scenes are being precomputed."""
+        c = todo[0]
+        job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shp, names)
+        ref = files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
+        for k, address in enumerate(pool.evaluators):
+            f = client.submit(evaluation_worker.warm_up, job, ref, cache_arg,
+                              key=f"warm-up-{run}-{k}", workers=[address],
+                              allow_other_workers=True, resources=pool.evaluate,
+                              priority=1, pure=False)
+            warming.add(f.key)
+            done.add(f)
+
+    warming: set[str] = set()
+    started = time.perf_counter()
+    try:
+        warm_up()
+        fill()
+        for fut in done:
+            if fut.key in warming:
+                w = fut.result()
+                busy["warm_up"] += w["seconds"]
+                totals["compilations"] += w["compiled"]
+                totals["programs_loaded"] += w["loaded"]
+                warming.discard(fut.key)
+                continue
+            if fut.key in batch_size:  # a precompute task: count it, leave its result
+                if fut.status == "error":
+                    fut.result()  # raises the scene's error here, before more evaluation
+                scenes_bar.update(batch_size.pop(fut.key))
+                continue
+            c, _ = flying.pop(fut.key)
+            res = fut.result()
+            t = time.perf_counter()
+            write_atomic(tables.part_path(out, "rollouts", c.index), res.rollouts)
+            write_atomic(tables.part_path(out, "scenes", c.index), res.scenes)
+            busy["write"] += time.perf_counter() - t
+            for k, v in res.seconds.items():
+                busy[k] += v
+            totals["rollouts_this_run"] += res.n_rollouts
+            totals["precomputed"] += res.precomputed
+            totals["precompute_cache_hits"] += res.cache_hits
+            totals["compilations"] += res.compiled
+            totals["programs_loaded"] += res.loaded
+            rollouts_bar.update(res.n_rollouts)
+            totals.setdefault("first_chunk_written", round(time.perf_counter() - started, 3))
+            del fut, res
+            fill()
+    except BaseException:
+        client.cancel([f for _, fs in flying.values() for f in fs])
+        raise
+    finally:
+        scenes_bar.close()
+        rollouts_bar.close()
+    totals["stage_seconds"] = {k: round(v, 3) for k, v in busy.items()}
+    return totals
 
 
 def cmd_sweep(args) -> int:
@@ -340,6 +359,6 @@ def cmd_sweep(args) -> int:
     if not args.out:
         raise InputError("<arguments>", "--out", "required unless --dry-run")
     summary = run_sweep(cfg, Path(args.out), Path(args.cache) if args.cache else None,
-                        args.workers, progress=not args.quiet)
+                        args.workers, progress=not args.quiet, scheduler=args.scheduler)
     print(json.dumps(summary))
     return 0

@@ -23,11 +23,12 @@ import os
 import pickle
 import signal
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from geometry_precompute import DEFAULTS, load_scene, precompute, random_scene
+from geometry_precompute import DEFAULTS, bake, load_scene, precompute, random_scene
 from geometry_precompute.precompute import PRECOMPUTE_VERSION, PrecomputeResult
 from geometry_precompute.scene import Scene, scene_to_dict
 
@@ -70,8 +71,11 @@ def cache_key(scene: Scene, settings) -> str:
 def precompute_cached(args) -> tuple[PrecomputeResult, bool]:
     """(result, whether it came from the cache) of (scene, overrides, cache folder)."""
     scene, overrides, cache = args
-    settings = scene.settings(DEFAULTS, overrides)
-    path = Path(cache) / f"{cache_key(scene, settings)}.pkl"
+    return _cached(scene, scene.settings(DEFAULTS, overrides), Path(cache))
+
+
+def _cached(scene: Scene, settings, cache: Path) -> tuple[PrecomputeResult, bool]:
+    path = cache / f"{cache_key(scene, settings)}.pkl"
     if path.exists():
         try:
             with path.open("rb") as f:
@@ -82,6 +86,60 @@ def precompute_cached(args) -> tuple[PrecomputeResult, bool]:
     r = precompute(scene, settings)
     write_atomic(path, pickle.dumps(r))
     return r, False
+
+
+def default_cache() -> Path:
+    """The precompute cache of this host: ``$XDG_CACHE_HOME/shacc/precompute``
+    (``~/.cache/shacc/precompute`` when it is unset)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "shacc" / "precompute"
+
+
+@dataclass(frozen=True)
+class Batch:
+    """What a sweep's precompute task returns: its scenes baked, once per sweep point of
+    the chunk's group, and the per-scene numbers of the scenes table."""
+
+    bakes: list          # BakedScenes per point, at the sweep's task and object counts
+    scenes: dict         # name, n_tasks, C_init, C_final, d, h: one entry per scene
+    precomputed: int     # scenes computed here (the others came from the cache)
+    cache_hits: int
+    seconds: float
+
+
+def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
+                     objects: int) -> Batch:
+    """A sweep's precompute task (a Dask task on a CPU worker). ``refs``: Scenes or
+    ``random_scene``'s arguments (the scene is built here); ``points``: the overrides of
+    the group's sweep points (they differ only in rollout settings, so the first one's
+    precompute serves all); ``cache``: the cache folder on this worker's host (None:
+    the host's default, :func:`default_cache`). The scenes are precomputed (or read
+    from the cache) and baked here, spreading the bake over every CPU of the cluster;
+    only arrays travel on."""
+    t0 = time.perf_counter()
+    folder = Path(cache) if cache else default_cache()
+    folder.mkdir(parents=True, exist_ok=True)
+    known: dict[tuple[str, int], object] = {}  # Settings per (scene's own, point)
+
+    def settings(scene: Scene, k: int):
+        key = (json.dumps(scene.settings_overrides, sort_keys=True, default=str), k)
+        if key not in known:
+            known[key] = scene.settings(DEFAULTS, points[k])
+        return known[key]
+
+    got = []
+    for ref in refs:
+        scene = ref if isinstance(ref, Scene) else random_scene(*ref)
+        got.append(_cached(scene, settings(scene, 0), folder))
+    bakes = [bake([replace(r, settings=settings(r.scene, k)) for r, _ in got], tasks,
+                  max_objects=objects) for k in range(len(points))]
+    results = [r for r, _ in got]
+    hits = sum(hit for _, hit in got)
+    return Batch(bakes, {"name": [r.scene.name for r in results],
+                         "n_tasks": [len(r.spaces) for r in results],
+                         **{k: [getattr(r, k) for r in results]
+                            for k in ("C_init", "C_final", "d", "h")}},
+                 len(got) - hits, hits, time.perf_counter() - t0)
 
 
 def precompute_scene(item) -> PrecomputeResult:

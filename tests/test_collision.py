@@ -202,7 +202,7 @@ def test_importing_the_package_starts_no_jax_backend():
 
 def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     """The precompute workers' module imports nothing from JAX (spawned workers import
-    the module of the task they are sent), and reading a scene file imports neither
+    the module of the task they are sent), nor does a sweep's client, and reading a scene file imports neither
     JAX nor coal, trimesh or manifold3d; the JAX half imports none of the mesh and
     collision libraries, nor scipy.spatial (a third of a second, which the CPU half
     imports where it uses it)."""
@@ -212,7 +212,10 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     from geometry_precompute import shipped_scene_paths
 
     heavy = "('jax', 'coal', 'trimesh', 'manifold3d')"
-    code = ("import sys\nimport sweeps.workers\nfrom geometry_precompute import load_scene\n"
+    # The sweep's client (runner, cluster, command line) loads no JAX either: only its
+    # evaluation workers do.
+    code = ("import sys\nimport sweeps.workers, sweeps.runner, sweeps.cluster, sweeps.cli\n"
+            "from geometry_precompute import load_scene\n"
             f"load_scene({str(shipped_scene_paths()[0])!r})\n"
             f"loaded = [m for m in {heavy} if m in sys.modules]\n"
             "assert not loaded, loaded\n"

@@ -35,6 +35,17 @@ start_grid = [[2, 2]]
 """
 
 
+def assert_same_tables(out: Path, ref: Path) -> None:
+    """Both datasets of two sweeps hold the same rows in the same order, no row missing
+    or duplicated."""
+    keys = {"scenes": ["point", "scene_index"],
+            "rollouts": ["point", "scene_index", "mode", "start", "task"]}
+    for name, key in keys.items():
+        got, want = pd.read_parquet(out / name), pd.read_parquet(ref / name)
+        assert not got.duplicated(key).any()
+        pd.testing.assert_frame_equal(got, want)
+
+
 def write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
     p = tmp_path / name
     p.write_text(text)
@@ -89,8 +100,10 @@ def test_tables_and_values(finished):
     # The two points differ only in v_max (a rollout setting): one group, evaluated with a
     # points axis, so 3 chunks of one scene each, not 6.
     assert summary["chunks"] == 3
-    scenes = pd.read_parquet(out / "scenes.parquet")
-    rollouts = pd.read_parquet(out / "rollouts.parquet")
+    scenes = pd.read_parquet(out / "scenes")
+    rollouts = pd.read_parquet(out / "rollouts")
+    assert sorted(p.name for p in (out / "rollouts").iterdir()) == \
+        [f"part-00000{k}.parquet" for k in range(3)]
     assert len(scenes) == 2 * 3 and len(rollouts) == 2 * 3 * 3 * 4 * 3
     assert {"point", "scene", "C_init", "C_final", "d", "h", "shacc.success",
             "shacc.delta_R_mean", "baseline.n_wrong"} <= set(scenes.columns)
@@ -114,15 +127,15 @@ def test_tables_and_values(finished):
 
 def test_rerun_is_a_no_op(finished):
     cfg, out, cache, _ = finished
-    before = (out / "scenes.parquet").stat().st_mtime_ns
+    before = (out / "scenes" / "part-000001.parquet").stat().st_mtime_ns
     # What a run killed in the middle of a write leaves: write_atomic's temporary files.
-    stale = [out / "parts" / ".scenes-000001.parquet.k1ll3d.tmp",
-             out / ".rollouts.parquet.k1ll3d.tmp"]
+    stale = [out / "scenes" / ".part-000001.parquet.k1ll3d.tmp",
+             out / ".config.json.k1ll3d.tmp"]
     for p in stale:
         p.write_bytes(b"half a file")
     again = run_sweep(cfg, out, cache, workers=1, progress=False)
     assert again["status"].startswith("nothing to do")
-    assert (out / "scenes.parquet").stat().st_mtime_ns == before
+    assert (out / "scenes" / "part-000001.parquet").stat().st_mtime_ns == before
     assert not any(p.exists() for p in stale)
 
 
@@ -143,7 +156,7 @@ def test_dry_run_counts(finished):
 
 
 def test_points_group_by_everything_but_rollout_settings(tmp_path):
-    from sweeps.runner import point_groups
+    from sweeps.plan import point_groups
 
     cfg = load_config(write(tmp_path, CONFIG + "[[points]]\nshrink_step = 0.9\n"
                             "[[points]]\ngripper.opening = 0.12\n"))
@@ -167,7 +180,7 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
     proc = subprocess.Popen(_sweep_cmd(config, out, cache), env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)  # its own group: to find its workers
-    first = out / "parts" / "scenes-000000.parquet"
+    first = out / "scenes" / "part-000000.parquet"
     deadline = time.time() + 240
     while not first.exists() and proc.poll() is None and time.time() < deadline:
         time.sleep(0.05)
@@ -178,17 +191,14 @@ def test_sigkill_and_resume_lose_nothing(tmp_path, finished):
     while process_group_members(proc.pid) and time.time() < deadline:
         time.sleep(0.1)
     assert process_group_members(proc.pid) == [], "worker processes outlived the sweep"
-    done = sorted(p.name for p in (out / "parts").glob("scenes-*.parquet"))
-    assert 1 <= len(done) < 3 and not (out / "scenes.parquet").exists()
+    done = sorted(p.name for p in (out / "scenes").glob("part-*.parquet"))
+    assert 1 <= len(done) < 3
     res = subprocess.run(_sweep_cmd(config, out, cache), env=env, capture_output=True,
                          text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout.strip().splitlines()[-1])
     assert summary["done_before"] == len(done) and summary["status"] == "complete"
-    for name in ("scenes", "rollouts"):
-        got = pd.read_parquet(out / f"{name}.parquet")
-        ref = pd.read_parquet(ref_out / f"{name}.parquet")
-        pd.testing.assert_frame_equal(got, ref)
+    assert_same_tables(out, ref_out)
     assert not list(out.rglob("*.tmp"))
 
 
@@ -252,8 +262,8 @@ def test_sweep_with_the_optimized_mode(tmp_path):
     out = tmp_path / "out"
     summary = run_sweep(cfg, out, tmp_path / "cache", workers=1, progress=False)
     assert summary["status"] == "complete"
-    scenes = pd.read_parquet(out / "scenes.parquet")
-    rollouts = pd.read_parquet(out / "rollouts.parquet")
+    scenes = pd.read_parquet(out / "scenes")
+    rollouts = pd.read_parquet(out / "rollouts")
     assert set(rollouts["mode"]) == {"shrinking", "optimized"}
     row = scenes[(scenes.point == 1) & (scenes.scene_index == 1)].iloc[0]
     scene = random_scene(5 + 1, "gaussian", 3, 3)

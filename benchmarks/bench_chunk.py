@@ -1,0 +1,65 @@
+"""Where an evaluation worker's time goes for one sweep chunk: the join of the precompute
+tasks' bakes, the evaluation, the tables; then a profile of one chunk.
+
+    python benchmarks/bench_chunk.py [--scenes 1024] [--workers 16] [--repeat 3]
+
+The chunk's scenes are precomputed and baked on a local Dask cluster (as in a sweep),
+then ``evaluation_worker.evaluate_chunk`` runs in this process, on its default device.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import pstats
+import tempfile
+import time
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", type=int, default=1024)
+    ap.add_argument("--workers", type=int, default=16)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+
+    from sweeps import compile_cache
+    from sweeps.cluster import connect
+    from sweeps.config import parse_config
+    from sweeps.evaluation_worker import ChunkJob, evaluate_chunk
+    from sweeps.plan import plan, precompute_batches, shapes
+    from sweeps.workers import precompute_batch
+
+    compile_cache.enable()
+    cfg = parse_config({"name": "chunk", "chunk": args.scenes, "source": {
+        "kind": "random", "count": args.scenes, "tasks": [10, 10], "seed": 0}},
+        "<bench>", tempfile.gettempdir())
+    chunk, shp = plan(cfg)[0], shapes(cfg)
+    t = time.perf_counter()
+    with connect(None, args.workers) as pool, tempfile.TemporaryDirectory() as cache:
+        futures = [pool.client.submit(precompute_batch, [cfg.random_ref(i) for i in part],
+                                      [{}], cache, shp.tasks, shp.objects,
+                                      resources=pool.precompute)
+                   for part in precompute_batches(chunk.scenes, args.workers)]
+        batches = pool.client.gather(futures)
+    print(f"precompute of {args.scenes} scenes on {args.workers} workers: "
+          f"{time.perf_counter() - t:.2f} s (cluster start included)")
+    job = ChunkJob(chunk, ({},), cfg.modes, shp, ())
+    for k in range(args.repeat):
+        t = time.perf_counter()
+        res = evaluate_chunk(job, *batches)
+        print(f"chunk {k}: {time.perf_counter() - t:.3f} s "
+              f"{ {k: round(v, 3) for k, v in res.seconds.items()} } "
+              f"compiled {res.compiled} loaded {res.loaded}, {res.n_rollouts} rollouts")
+    prof = cProfile.Profile()
+    prof.enable()
+    evaluate_chunk(job, *batches)
+    prof.disable()
+    out = io.StringIO()
+    pstats.Stats(prof, stream=out).sort_stats("cumulative").print_stats(35)
+    print(out.getvalue())
+
+
+if __name__ == "__main__":
+    main()

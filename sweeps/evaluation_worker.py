@@ -1,0 +1,171 @@
+"""What a sweep's evaluation workers run: one chunk from its precomputed scenes to the
+bytes of its two Parquet parts.
+
+A Dask task on a worker that holds the accelerator (or the CPU evaluation worker):
+join the bakes its precompute tasks made (at the sweep's padded shapes,
+``plan.Shapes``), evaluate every point of its group in one call, build the Arrow tables
+and encode them, so that only bytes travel back to the machine that writes the output.
+The compiled programs persist on disk (``compile_cache``); the compilations each chunk
+caused are counted with JAX's monitoring events and reported.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import pyarrow as pa
+
+from geometry_precompute.bake import concatenate
+
+from . import tables
+from .plan import Chunk, Shapes
+
+
+@dataclass(frozen=True)
+class ChunkJob:
+    chunk: Chunk
+    points: tuple[dict, ...]       # the overrides of chunk.points, in that order
+    modes: tuple[str, ...]
+    shapes: Shapes
+    setting_names: tuple[str, ...]  # the scenes table's set.* columns
+
+
+@dataclass(frozen=True)
+class ChunkResult:
+    index: int
+    scenes: bytes                  # Parquet file of the chunk's scene rows
+    rollouts: bytes                # Parquet file of its rollout rows
+    n_scenes: int
+    n_rollouts: int
+    precomputed: int               # scenes precomputed (not read from a cache)
+    cache_hits: int
+    seconds: dict = field(default_factory=dict)  # busy time: precompute (its tasks, bake
+    #                                              included), join, evaluate, tables
+    compiled: int = 0              # programs XLA built for this chunk
+    loaded: int = 0                # programs read from the persistent cache instead
+    worker: str = ""
+
+
+_LOCK = threading.Lock()
+_COUNTS = {"programs": 0, "loaded": 0}
+_READY = False
+
+
+def _setup() -> None:
+    """Once per worker process: the persistent compilation cache, and counters of
+    compilations and cache loads (JAX's monitoring events)."""
+    global _READY
+    with _LOCK:
+        if _READY:
+            return
+        from jax import monitoring
+
+        from . import compile_cache
+
+        compile_cache.enable()
+
+        def on_duration(event: str, duration: float, **_) -> None:
+            # Timed around every backend compilation, persistent-cache loads included.
+            if event == "/jax/core/compile/backend_compile_duration":
+                _COUNTS["programs"] += 1
+
+        def on_event(event: str, **_) -> None:
+            if event == "/jax/compilation_cache/cache_hits":
+                _COUNTS["loaded"] += 1
+
+        monitoring.register_event_duration_secs_listener(on_duration)
+        monitoring.register_event_listener(on_event)
+        _READY = True
+
+
+def warm_up(job: ChunkJob, ref, cache: str | None) -> dict:
+    """Compile (or load) the program of ``job``'s chunks while their scenes are still
+    being precomputed: one scene (``ref``) is precomputed here and evaluated, padded to
+    the chunk's shapes. Returns the seconds it took and the programs it compiled and
+    loaded."""
+    from .pipeline import evaluate_points
+    from .workers import precompute_batch
+
+    _setup()
+    before = dict(_COUNTS)
+    t0 = time.perf_counter()
+    batch = precompute_batch([ref], list(job.points), cache, job.shapes.tasks,
+                             job.shapes.objects)
+    evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
+                    job.modes)
+    loaded = _COUNTS["loaded"] - before["loaded"]
+    return {"seconds": time.perf_counter() - t0, "loaded": loaded,
+            "compiled": _COUNTS["programs"] - before["programs"] - loaded}
+
+
+@dataclass(frozen=True)
+class ChunkArrays:
+    """A chunk's evaluation, trimmed to its scenes and to compact dtypes, on its way from
+    the evaluation worker to the CPU worker that makes its tables."""
+
+    rollouts: list        # per point: outcome, activated, step, delta_R (S, M, N, T)
+    metrics: list         # per point: u_scene, delta_R_mean, outcome_counts (S, ...)
+    labels: dict          # per scene: name, n_tasks, C_init, C_final, d, h
+    counts: dict          # precomputed, cache_hits
+    seconds: dict
+    compiled: int
+    loaded: int
+    worker: str
+
+
+def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
+    """``batches``: the chunk's precompute tasks' results, in order
+    (``workers.Batch``: each point's bake of its scenes). Only the accelerator's part
+    runs here; :func:`encode_chunk` makes the tables on a CPU worker."""
+    from .pipeline import evaluate_points
+
+    _setup()
+    before = dict(_COUNTS)
+    t0 = time.perf_counter()
+    bakes = [concatenate([b.bakes[k] for b in batches], pad_to=job.shapes.scenes)
+             for k in range(len(job.points))]
+    labels = {k: [x for b in batches for x in b.scenes[k]] for k in batches[0].scenes}
+    t1 = time.perf_counter()
+    evs = evaluate_points(bakes, job.modes)
+    S = len(job.chunk.scenes)
+    # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
+    small = {"outcome": "int8", "activated": "int16", "step": "int32", "delta_R": "float32"}
+    rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in small.items()}
+                for ev in evs]
+    metrics = [{k: getattr(ev.metrics, k)[:S] for k in
+                ("u_scene", "delta_R_mean", "outcome_counts")} for ev in evs]
+    t2 = time.perf_counter()
+    programs = _COUNTS["programs"] - before["programs"]
+    loaded = _COUNTS["loaded"] - before["loaded"]
+    return ChunkArrays(rollouts, metrics, labels,
+                       {"precomputed": sum(b.precomputed for b in batches),
+                        "cache_hits": sum(b.cache_hits for b in batches)},
+                       {"precompute": sum(b.seconds for b in batches),
+                        "join": t1 - t0, "evaluate": t2 - t1},
+                       programs - loaded, loaded, f"{socket.gethostname()}:{os.getpid()}")
+
+
+def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
+    """A chunk's two Parquet parts from its evaluation (a CPU worker's task: the tables
+    of many chunks are made in parallel, not one after another on the accelerator's
+    worker)."""
+    t0 = time.perf_counter()
+    scenes, rollouts = [], []
+    for i, p, ro, me in zip(job.chunk.points, job.points, arrays.rollouts, arrays.metrics,
+                            strict=True):
+        scenes.append(tables.scenes_table(i, p, job.setting_names, job.modes,
+                                          job.chunk.scenes, arrays.labels,
+                                          SimpleNamespace(**me)))
+        rollouts.append(tables.rollouts_table(i, job.modes, job.chunk.scenes,
+                                              SimpleNamespace(**ro)))
+    scenes_t, rollouts_t = pa.concat_tables(scenes), pa.concat_tables(rollouts)
+    out_s, out_r = tables.parquet_bytes(scenes_t), tables.parquet_bytes(rollouts_t)
+    return ChunkResult(job.chunk.index, out_s, out_r, scenes_t.num_rows, rollouts_t.num_rows,
+                       arrays.counts["precomputed"], arrays.counts["cache_hits"],
+                       {**arrays.seconds, "tables": time.perf_counter() - t0},
+                       arrays.compiled, arrays.loaded, arrays.worker)

@@ -1,0 +1,103 @@
+"""A sweep's results as Arrow tables and a Parquet dataset (SPEC section 12).
+
+``OUT/scenes/`` (one row per sweep point and scene) and ``OUT/rollouts/`` (one row
+per rollout) hold one part file per chunk, ``part-000123.parquet``, written atomically
+(a temporary name starting with ``.`` that every reader skips, then a rename). Read
+either folder as one table with ``pyarrow.dataset.dataset(DIR)``,
+``pandas.read_parquet(DIR)``, ``polars.read_parquet(f"{DIR}/*.parquet")`` or DuckDB's
+``read_parquet('DIR/*.parquet')``.
+
+The tables are built from the evaluation's arrays with pyarrow directly, with one
+schema for every part of a sweep: a ``set.NAME`` column (the value as text, null
+where the point leaves it at its default) for every setting any point sets.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from geometry_precompute.schema import OUTCOMES
+
+PART = "part-{:06d}.parquet"
+
+
+def part_path(out: Path, table: str, index: int) -> Path:
+    return out / table / PART.format(index)
+
+
+def _dictionary(codes: np.ndarray, names) -> pa.DictionaryArray:
+    return pa.DictionaryArray.from_arrays(pa.array(codes.astype(np.int8, copy=False)),
+                                          pa.array(list(names), pa.string()))
+
+
+def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indices,
+                 labels: dict, metrics) -> pa.Table:
+    """One row per scene of one sweep point: identity, the precompute's numbers
+    (``labels``: name, n_tasks, C_init, C_final, d, h per scene), and per mode the
+    success rate, mean delta_R and the count of each outcome."""
+    S = len(scene_indices)
+    cols = {"point": pa.array(np.full(S, point_index, np.int64))}
+    for k in setting_names:
+        cols[f"set.{k}"] = pa.array([str(point[k]) if k in point else None] * S, pa.string())
+    cols["scene_index"] = pa.array(np.asarray(scene_indices, np.int64))
+    cols["scene"] = pa.array(labels["name"], pa.string())
+    cols["n_tasks"] = pa.array(np.asarray(labels["n_tasks"], np.int64))
+    for name in ("C_init", "C_final", "d", "h"):
+        cols[name] = pa.array(np.asarray(labels[name], np.float64))
+    for m, mode in enumerate(modes):
+        cols[f"{mode}.success"] = pa.array(np.asarray(metrics.u_scene[:S, m], np.float64))
+        dr = np.asarray(metrics.delta_R_mean[:S, m], np.float64)
+        cols[f"{mode}.delta_R_mean"] = pa.array(dr, mask=~np.isfinite(dr))
+        for o, outcome in enumerate(OUTCOMES):
+            cols[f"{mode}.n_{outcome}"] = pa.array(
+                np.asarray(metrics.outcome_counts[:S, m, o], np.int64))
+    return pa.table(cols)
+
+
+def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table:
+    """One row per rollout of one sweep point (padding left out), in the order scene,
+    mode, start, task: scene, mode, start, intended task, outcome, activated task (-1:
+    none), steps and delta_R."""
+    S = len(scene_indices)
+    outcome = np.asarray(rollouts.outcome)[:S]
+    shape = outcome.shape
+    keep = (outcome >= 0).reshape(-1)
+
+    def flat(a, dtype):
+        return np.asarray(a)[:S].reshape(-1)[keep].astype(dtype, copy=False)
+
+    def index(axis: int, values, dtype):
+        along = np.asarray(values, dtype).reshape([-1 if k == axis else 1 for k in range(4)])
+        return np.broadcast_to(along, shape).reshape(-1)[keep]
+
+    return pa.table({
+        "point": pa.array(np.full(int(keep.sum()), point_index, np.int32)),
+        "scene_index": pa.array(index(0, scene_indices, np.int32)),
+        "mode": _dictionary(index(1, np.arange(shape[1]), np.int8), modes),
+        "start": pa.array(index(2, np.arange(shape[2]), np.int32)),
+        "task": pa.array(index(3, np.arange(shape[3]), np.int16)),
+        "outcome": _dictionary(flat(outcome, np.int8), OUTCOMES),
+        "activated": pa.array(flat(rollouts.activated, np.int16)),
+        "steps": pa.array(flat(rollouts.step, np.int32)),
+        "delta_R": pa.array(flat(rollouts.delta_R, np.float32)),
+    })
+
+
+def parquet_bytes(table: pa.Table) -> bytes:
+    """A table as the bytes of one Parquet file (made where the table is, written by
+    the machine that owns the output)."""
+    sink = io.BytesIO()
+    pq.write_table(table, sink)
+    return sink.getvalue()
+
+
+def read(out: Path, table: str) -> pa.Table:
+    """One of a sweep's datasets (``scenes`` or ``rollouts``) as one table."""
+    import pyarrow.dataset as ds
+
+    return ds.dataset(Path(out) / table, format="parquet").to_table()
