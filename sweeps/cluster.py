@@ -81,12 +81,15 @@ def dask_setup(worker) -> None:
     and the command, not each worker, decides what it means (the cluster is closed).
     The precompute workers run at a lower priority (nice 5): with one per core, they
     would otherwise take CPU time from the evaluation worker's compilation and from the
-    host loop that drives the accelerator, which every chunk waits on."""
+    host loop that drives the accelerator, which every chunk waits on. (Starting JAX on
+    the evaluation worker here, in the foreground or in a thread, made the sweep no
+    faster: measured, benchmarks/RESULTS.md.)"""
     with contextlib.suppress(ValueError):  # not the main thread: nothing to do
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     if PRECOMPUTE in (worker.state.total_resources or {}):
         with contextlib.suppress(OSError):
             os.nice(5)
+
 
 
 def _local(workers: int | None) -> tuple[object, int, int]:

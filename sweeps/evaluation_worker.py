@@ -83,19 +83,27 @@ def _setup() -> None:
         _READY = True
 
 
-def warm_up(job: ChunkJob, ref, cache: str | None) -> dict:
+def warm_up(job: ChunkJob, ref) -> dict:
     """Compile (or load) the program of ``job``'s chunks while their scenes are still
-    being precomputed: one scene (``ref``) is precomputed here and evaluated, padded to
-    the chunk's shapes. Returns the seconds it took and the programs it compiled and
-    loaded."""
+    being precomputed: one scene (``ref``: a Scene or ``random_scene``'s arguments) is
+    precomputed here, outside any cache, and evaluated, padded to the chunk's shapes.
+    Returns the seconds it took and the programs it compiled and loaded."""
+    from geometry_precompute import DEFAULTS, precompute, random_scene
+    from geometry_precompute.scene import Scene
+
     from .pipeline import evaluate_points
-    from .workers import precompute_batch
+    from .workers import bake_batch
 
     _setup()
     before = dict(_COUNTS)
     t0 = time.perf_counter()
-    batch = precompute_batch([ref], list(job.points), cache, job.shapes.tasks,
-                             job.shapes.objects)
+    scene = ref if isinstance(ref, Scene) else random_scene(*ref)
+
+    def settings(s, k):
+        return s.settings(DEFAULTS, job.points[k])
+
+    batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
+                       settings, job.shapes.tasks, job.shapes.objects, 0.0)
     evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
                     job.modes)
     loaded = _COUNTS["loaded"] - before["loaded"]

@@ -54,6 +54,9 @@ CHUNK_OVERHEAD_S = 0.05
 DRY_RUN_EXACT = 100_000
 
 
+# Scenes per precompute thread that may be precomputed ahead of the evaluation.
+LOOKAHEAD = 1024
+
 # What a sweep writes into its output folder; a folder holding anything else is refused.
 SWEEP_FILES = ("config.json", "scenes", "rollouts", ".*.tmp", ".lock")
 TABLES = ("scenes", "rollouts")
@@ -112,19 +115,21 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
 
 def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
               workers: int | None = None, progress: bool = True,
-              scheduler: str | None = None) -> dict:
+              scheduler: str | None = None, lookahead: int = LOOKAHEAD) -> dict:
     """Run (or resume) a sweep into ``out``. ``cache``: the precompute cache folder, the
     same path on every worker host (default: each host's ``~/.cache/shacc/precompute``);
     ``workers``: precompute processes of the local cluster (default: one per core);
     ``scheduler``: an existing Dask cluster's address (default: the config's
-    ``scheduler``, else a local cluster)."""
+    ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
+    that may be precomputed ahead of the evaluation."""
     check_output_dir(out, "--out", SWEEP_FILES)
     if cache is not None:
         check_output_dir(cache, "--cache", ("*",))
         cache.mkdir(parents=True, exist_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out):
-        return _run_locked(cfg, out, cache, workers, progress, scheduler or cfg.scheduler)
+        return _run_locked(cfg, out, cache, workers, progress, scheduler or cfg.scheduler,
+                           lookahead)
 
 
 @contextlib.contextmanager
@@ -183,7 +188,7 @@ def _rollouts_per_scene(cfg: SweepConfig, files) -> list[float]:
 
 
 def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | None,
-                progress: bool, scheduler: str | None) -> dict:
+                progress: bool, scheduler: str | None, lookahead: int) -> dict:
     t0 = time.perf_counter()
     h = cfg.hash()  # scene files are loaded and checked here, before any work
     _check_marker(out, cfg, h)
@@ -209,7 +214,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
-        counts = _stream(cfg, out, todo, files, pool, cache, progress)
+        counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
         phases["stream"] = time.perf_counter() - t0
         summary.update(counts)
         summary.update({"precompute_workers": pool.precompute_threads,
@@ -223,7 +228,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
 
 
 def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
-            progress: bool) -> dict:
+            progress: bool, lookahead: int) -> dict:
     """Submit the chunks of ``todo`` with a bounded number in flight, and write each as its
     evaluation comes back. Returns the counts and busy times for the summary."""
     from distributed import as_completed
@@ -238,10 +243,13 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     names = _setting_names(cfg)
     cache_arg = None if cache is None else str(cache)
     per_scene = _rollouts_per_scene(cfg, files)
-    # In flight: two chunks per evaluation worker, or enough scenes to keep every
-    # precompute thread busy for a while if chunks are small; never more, whatever the
+    # In flight (submitted, not yet written): four chunks per evaluation worker, and the
+    # precompute may run up to ``lookahead`` scenes per precompute thread ahead of the
+    # evaluation (while the first program compiles, say: a precomputed scene waiting is
+    # its bake, under a kilobyte). Bounded by the chunk size and the cluster, never by the
     # sweep's size.
-    cap = max(2 * len(todo[0].scenes) * pool.evaluate_workers, 8 * pool.precompute_threads)
+    cap = max(4 * len(todo[0].scenes) * pool.evaluate_workers,
+              lookahead * pool.precompute_threads)
     busy = dict.fromkeys(("precompute", "warm_up", "join", "evaluate", "tables", "write"),
                          0.0)
     totals = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
@@ -253,7 +261,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
                                       for c in todo)),
                         unit="rollout", unit_scale=True, desc="evaluate", **bar_opts)
     waiting = iter(todo)
-    flying: dict[str, tuple[Chunk, list]] = {}  # evaluation key -> chunk, its tasks
+    flying: dict[str, tuple[Chunk, list]] = {}  # encode key -> chunk, all its tasks
     batch_size: dict[str, int] = {}
     done = as_completed()
 
@@ -294,11 +302,12 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
         c = todo[0]
         job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shp, names)
         ref = files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
-        for k, address in enumerate(pool.evaluators):
-            f = client.submit(evaluation_worker.warm_up, job, ref, cache_arg,
-                              key=f"warm-up-{run}-{k}", workers=[address],
-                              allow_other_workers=True, resources=pool.evaluate,
-                              priority=1, pure=False)
+        # One per evaluation worker: each takes one, holding its single evaluate slot.
+        # (Not pinned with workers=[...]: distributed 2026.8's scheduler fails with a
+        # KeyError when a pinned task with resources is moved off a dead worker.)
+        for k in range(pool.evaluate_workers):
+            f = client.submit(evaluation_worker.warm_up, job, ref, key=f"warm-up-{run}-{k}",
+                              resources=pool.evaluate, priority=1, pure=False)
             warming.add(f.key)
             done.add(f)
 

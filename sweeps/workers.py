@@ -131,6 +131,14 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
     for ref in refs:
         scene = ref if isinstance(ref, Scene) else random_scene(*ref)
         got.append(_cached(scene, settings(scene, 0), folder))
+    return bake_batch(got, points, settings, tasks, objects, time.perf_counter() - t0)
+
+
+def bake_batch(got: list[tuple[PrecomputeResult, bool]], points: list[dict], settings,
+               tasks: int, objects: int, seconds: float) -> Batch:
+    """A :class:`Batch` of precomputed scenes ((result, cache hit) pairs): each point's
+    bake (``settings(scene, k)``: point k's settings of a scene) at the sweep's sizes."""
+    t0 = time.perf_counter()
     bakes = [bake([replace(r, settings=settings(r.scene, k)) for r, _ in got], tasks,
                   max_objects=objects) for k in range(len(points))]
     results = [r for r, _ in got]
@@ -139,7 +147,7 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
                          "n_tasks": [len(r.spaces) for r in results],
                          **{k: [getattr(r, k) for r in results]
                             for k in ("C_init", "C_final", "d", "h")}},
-                 len(got) - hits, hits, time.perf_counter() - t0)
+                 len(got) - hits, hits, seconds + time.perf_counter() - t0)
 
 
 def precompute_scene(item) -> PrecomputeResult:

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import os
+import signal
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -74,3 +78,37 @@ def count_compiles(caplog):
             found.extend(r.getMessage() for r in caplog.records[start:]
                          if f"Compiling jit({name})" in r.getMessage())
     return counting
+
+
+@pytest.fixture
+def started_cluster(tmp_path):
+    """A scheduler and two workers started apart, as on other hosts: one takes the
+    precompute, one the evaluation. All stopped afterwards."""
+    sched_file = tmp_path / "scheduler.json"
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    dask = [sys.executable, "-m", "dask"]
+    procs = [subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(sched_file)],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)]
+    try:
+        deadline = time.time() + 60
+        while not sched_file.exists() and time.time() < deadline:
+            time.sleep(0.1)
+        address = json.loads(sched_file.read_text())["address"]
+        for resource in ("precompute=1", "evaluate=1"):
+            procs.append(subprocess.Popen(
+                [*dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
+                 "--nworkers", "1", "--resources", resource, "--no-dashboard"],
+                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                start_new_session=True))
+        yield address
+    finally:
+        for p in procs:
+            with_group = [p.pid, *process_group_members(p.pid)]
+            for pid in with_group:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            p.wait()

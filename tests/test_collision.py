@@ -202,10 +202,10 @@ def test_importing_the_package_starts_no_jax_backend():
 
 def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     """The precompute workers' module imports nothing from JAX (spawned workers import
-    the module of the task they are sent), nor does a sweep's client, and reading a scene file imports neither
-    JAX nor coal, trimesh or manifold3d; the JAX half imports none of the mesh and
-    collision libraries, nor scipy.spatial (a third of a second, which the CPU half
-    imports where it uses it)."""
+    the module of the task they are sent), nor does a sweep's client, and reading a
+    scene file imports neither JAX nor coal, trimesh or manifold3d; the JAX half
+    imports none of the mesh and collision libraries, nor scipy.spatial (a third of a
+    second, which the CPU half imports where it uses it)."""
     import subprocess
     import sys
 

@@ -273,3 +273,71 @@ def test_sweep_with_the_optimized_mode(tmp_path):
     ev = evaluate_results([r], ("shrinking", "optimized"))
     for m, mode in enumerate(("shrinking", "optimized")):
         assert row[f"{mode}.success"] == pytest.approx(float(ev.evaluation.metrics.u_scene[0, m]))
+
+
+def _env() -> dict:
+    return {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONUNBUFFERED": "1"}
+
+
+def _summary(res: subprocess.CompletedProcess) -> dict:
+    assert res.returncode == 0, res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_started_cluster_gives_the_embedded_tables(started_cluster, tmp_path, finished):
+    """``--scheduler``: a scheduler and two workers started apart on 127.0.0.1 (the
+    protocol between hosts; one takes the precompute, one the evaluation) write the
+    tables of the embedded local cluster."""
+    config = write(tmp_path, CONFIG)
+    apart = tmp_path / "apart"
+    cmd = [*_sweep_cmd(config, apart, tmp_path / "cache"), "--scheduler", started_cluster]
+    s = _summary(subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=600))
+    assert s["scheduler"] == started_cluster and s["status"] == "complete"
+    assert s["precompute_workers"] == 1 and s["evaluation_workers"] == 1
+    assert s["precomputed"] == 3 and s["compilations"] + s["programs_loaded"] > 0
+    assert_same_tables(apart, finished[1])
+
+
+def _session_processes(sid: int, holding: str) -> list[int]:
+    """Processes of session ``sid`` that have a library whose path holds ``holding``
+    mapped (the evaluation worker maps jaxlib; a precompute worker coal)."""
+    found = []
+    for pid in process_group_members(sid):
+        if pid == sid:
+            continue
+        try:
+            if holding in Path(f"/proc/{pid}/maps").read_text():
+                found.append(pid)
+        except OSError:
+            pass
+    return found
+
+
+def test_workers_killed_mid_task_lose_and_duplicate_nothing(tmp_path, finished):
+    """The evaluation worker is killed while it compiles (the compilation cache is off,
+    so that takes seconds), and a precompute worker with it; the nannies start new
+    ones, Dask reruns the lost tasks, and the tables equal an uninterrupted run's."""
+    config = write(tmp_path, CONFIG)
+    out, cache = tmp_path / "killed", tmp_path / "cache"
+    env = {**_env(), "SHACC_COMPILE_CACHE": "off"}
+    cmd = [*_sweep_cmd(config, out, cache)[:-3], "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.time() + 300
+    while not list(cache.glob("*.pkl")) and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    evaluators = _session_processes(proc.pid, "jaxlib")
+    precomputers = [p for p in _session_processes(proc.pid, "libcoal")
+                    if p not in evaluators]
+    assert evaluators and precomputers, "workers not found"
+    assert not list((out / "scenes").glob("part-*")), "the first chunk was already written"
+    for pid in (evaluators[0], precomputers[0]):
+        os.kill(pid, signal.SIGKILL)
+    stdout, stderr = proc.communicate(timeout=600)
+    assert proc.returncode == 0, stderr[-3000:]
+    summary = json.loads(stdout.strip().splitlines()[-1])
+    assert summary["status"] == "complete" and summary["done_before"] == 0
+    assert_same_tables(out, finished[1])
+    assert process_group_members(proc.pid) == []
+
