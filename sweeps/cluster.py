@@ -97,7 +97,10 @@ def _local(workers: int | None) -> tuple[object, int, int]:
 
     n_cpu = workers or os.cpu_count() or 1
     gpus = local_gpus()
-    base = {"nthreads": 1, "preload": ["sweeps.cluster"], "silence_logs": logging.ERROR}
+    # Workers log nothing below CRITICAL: a closing cluster makes them log connection
+    # errors (with tracebacks) that are no error of the sweep's; task errors reach the
+    # command through their futures.
+    base = {"nthreads": 1, "preload": ["sweeps.cluster"], "silence_logs": logging.CRITICAL}
     spec = {f"precompute-{i}": {"cls": Nanny, "options": {
         **base, "resources": {PRECOMPUTE: 1}, "env": dict(QUIET)}} for i in range(n_cpu)}
     evals = [{"CUDA_VISIBLE_DEVICES": g} for g in gpus] or [{"JAX_PLATFORMS": "cpu"}]
@@ -106,7 +109,7 @@ def _local(workers: int | None) -> tuple[object, int, int]:
             **base, "resources": {EVALUATE: 1}, "memory_limit": 0,
             "env": {**QUIET, **env}}}
     scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0"}}
-    cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.ERROR,
+    cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.CRITICAL,
                           name="shacc-sweep")
     return cluster, n_cpu, len(evals)
 
