@@ -173,14 +173,14 @@ def _sweep_cmd(config: Path, out: Path, cache: Path) -> list[str]:
 
 
 def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished):
-    """One sweep of 6 chunks, interrupted twice. First its evaluation worker is killed
+    """One sweep of 12 chunks, interrupted twice. First its evaluation worker is killed
     while it compiles (the compilation cache is off, so that takes seconds), and a
     precompute worker with it: the nannies start new ones and Dask reruns the lost
     tasks. Then, after its first chunk, the command itself is killed with SIGKILL: it
     leaves whole chunks and no process. The rerun finishes it: every row once, and the
     rows of the reference sweep's three scenes (the same seeds) equal."""
     _, ref_out, _, _ = finished
-    config = write(tmp_path, CONFIG.replace("count = 3", "count = 6"))
+    config = write(tmp_path, CONFIG.replace("count = 3", "count = 12"))
     out, cache = tmp_path / "killed", tmp_path / "cache"
     env = {**_env(), "SHACC_COMPILE_CACHE": "off"}
     cmd = [*_sweep_cmd(config, out, cache)[:-3], "--workers", "2", "--quiet"]
@@ -198,9 +198,11 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
     assert not list((out / "scenes").glob("part-*")), "the first chunk was already written"
     for pid in (evaluators[0], precomputers[0]):
         os.kill(pid, signal.SIGKILL)
+    # The evaluations queue on one worker; the first part is written while most of the
+    # others are still to come.
     first = out / "scenes" / "part-000000.parquet"
     while not first.exists() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.05)
+        time.sleep(0.005)
     assert first.exists(), "the sweep wrote no chunk after losing its workers"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
@@ -209,7 +211,7 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
         time.sleep(0.1)
     assert process_group_members(proc.pid) == [], "worker processes outlived the sweep"
     done = sorted(p.name for p in (out / "scenes").glob("part-*.parquet"))
-    assert 1 <= len(done) < 6
+    assert 1 <= len(done) < 12
     res = subprocess.run(_sweep_cmd(config, out, cache), env=_env(), capture_output=True,
                          text=True, timeout=600)
     assert res.returncode == 0, res.stderr
@@ -219,7 +221,7 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
             "rollouts": ["point", "scene_index", "mode", "start", "task"]}
     for name, key in keys.items():
         got, want = pd.read_parquet(out / name), pd.read_parquet(ref_out / name)
-        assert not got.duplicated(key).any() and len(got) == 2 * len(want)
+        assert not got.duplicated(key).any() and len(got) == 4 * len(want)
         first_rows = got[got.scene_index < 3].sort_values(key).reset_index(drop=True)
         pd.testing.assert_frame_equal(first_rows,
                                       want.sort_values(key).reset_index(drop=True))
