@@ -46,7 +46,6 @@ class Pool:
     evaluate: dict | None
     precompute_threads: int
     evaluators: tuple[str, ...]  # addresses of the workers that take the evaluation
-    local: bool
 
     @property
     def evaluate_workers(self) -> int:
@@ -114,15 +113,6 @@ def _local(workers: int | None) -> tuple[object, int, int]:
     return cluster, n_cpu, len(evals)
 
 
-def _version() -> str:
-    import importlib.metadata as md
-
-    try:
-        return md.version("shacc")
-    except md.PackageNotFoundError:
-        return "unknown"
-
-
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None,
             timeout: float = 60.0) -> Iterator[Pool]:
@@ -153,8 +143,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
             client.wait_for_workers(n_cpu + n_eval, timeout=timeout)
             info = client.scheduler_info(n_workers=-1)["workers"]
             pool = Pool(client, {PRECOMPUTE: 1}, {EVALUATE: 1}, n_cpu,
-                        tuple(a for a, w in info.items() if w["resources"].get(EVALUATE)),
-                        True)
+                        tuple(a for a, w in info.items() if w["resources"].get(EVALUATE)))
         yield pool
     finally:
         with warnings.catch_warnings():
@@ -171,8 +160,10 @@ def _remote(client, scheduler: str, timeout: float) -> Pool:
         raise InputError("<arguments>", "--scheduler", f"the scheduler at {scheduler!r} has no "
                          f"workers after {timeout:.0f} s; start some (README: \"Sweeps on a "
                          "cluster\")") from None
-    versions = client.run(_version)
-    mine = _version()
+    from .config import installed_version
+
+    versions = client.run(installed_version)
+    mine = installed_version()
     odd = {w: v for w, v in versions.items() if v != mine}
     if odd:
         w, v = next(iter(odd.items()))
@@ -186,5 +177,5 @@ def _remote(client, scheduler: str, timeout: float) -> Pool:
     pre, ev = having(PRECOMPUTE), having(EVALUATE)
     return Pool(client, {PRECOMPUTE: 1} if pre else None, {EVALUATE: 1} if ev else None,
                 sum(w.get("nthreads", 1) for w in (pre or info).values()),
-                tuple(ev or info), False)
+                tuple(ev or info))
 

@@ -107,14 +107,16 @@ class SweepConfig:
         return {"name": self.name, "modes": list(self.modes), "chunk": self.chunk,
                 "source": self.source, "scene_files": scenes,
                 "points": self.points, "defaults": DEFAULTS.to_dict(),
-                "shacc_version": _version()}
+                "shacc_version": installed_version()}
 
     def hash(self) -> str:
         blob = json.dumps(self.resolved(), sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _version() -> str:
+def installed_version() -> str:
+    """This installation's shacc version (recorded with a sweep's config; the workers of
+    a cluster must have the same)."""
     import importlib.metadata as md
 
     try:

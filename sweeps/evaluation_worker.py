@@ -1,10 +1,11 @@
-"""What a sweep's evaluation workers run: one chunk from its precomputed scenes to the
-bytes of its two Parquet parts.
+"""A sweep chunk's way from its precomputed scenes to the bytes of its two Parquet parts.
 
-A Dask task on a worker that holds the accelerator (or the CPU evaluation worker):
-join the bakes its precompute tasks made (at the sweep's padded shapes,
-``plan.Shapes``), evaluate every point of its group in one call, build the Arrow tables
-and encode them, so that only bytes travel back to the machine that writes the output.
+On a worker that holds the accelerator (or the CPU evaluation worker),
+:func:`warm_up` compiles the chunks' program early and :func:`evaluate_chunk` joins
+the bakes the precompute tasks made (at the sweep's padded shapes, ``plan.Shapes``)
+and evaluates every point of the chunk's group in one call; on a CPU worker,
+:func:`encode_chunk` builds the Arrow tables and encodes them, so that only bytes
+travel back to the machine that writes the output.
 The compiled programs persist on disk (``compile_cache``); the compilations each chunk
 caused are counted with JAX's monitoring events and reported.
 """
@@ -88,22 +89,19 @@ def warm_up(job: ChunkJob, ref) -> dict:
     being precomputed: one scene (``ref``: a Scene or ``random_scene``'s arguments) is
     precomputed here, outside any cache, and evaluated, padded to the chunk's shapes.
     Returns the seconds it took and the programs it compiled and loaded."""
-    from geometry_precompute import DEFAULTS, precompute, random_scene
+    from geometry_precompute import precompute, random_scene
     from geometry_precompute.scene import Scene
 
     from .pipeline import evaluate_points
-    from .workers import bake_batch
+    from .workers import bake_batch, point_settings
 
     _setup()
     before = dict(_COUNTS)
     t0 = time.perf_counter()
     scene = ref if isinstance(ref, Scene) else random_scene(*ref)
-
-    def settings(s, k):
-        return s.settings(DEFAULTS, job.points[k])
-
+    settings = point_settings(list(job.points))
     batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
-                       settings, job.shapes.tasks, job.shapes.objects, 0.0)
+                       job.shapes.tasks, job.shapes.objects, 0.0, settings)
     evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
                     job.modes)
     loaded = _COUNTS["loaded"] - before["loaded"]

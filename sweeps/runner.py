@@ -3,11 +3,12 @@
 The chunk plan (``plan``) comes from the config alone. For every chunk not yet
 written, the client submits its precompute tasks (``workers.precompute_batch``, on
 the CPU workers, each scene built and precomputed where it runs, cached per host)
-and one evaluation task that depends on them (``evaluation_worker.evaluate_chunk``,
-on an evaluation worker), keeping a bounded number of chunks in flight: while one
-chunk is evaluated, later scenes are being precomputed, and memory on the client and
-on each worker stays bounded by the chunk size whatever the sweep's size. Each
-evaluation returns its two Parquet parts as bytes; the client alone writes ``OUT``.
+an evaluation task that depends on them (``evaluation_worker.evaluate_chunk``, on an
+evaluation worker) and a task that makes its tables (``evaluation_worker.encode_chunk``,
+on a CPU worker), keeping a bounded number of chunks in flight: while one chunk is
+evaluated, later scenes are being precomputed, and memory on the client and on each
+worker stays bounded by the chunk size and the cluster, whatever the sweep's size.
+Each chunk's two Parquet parts come back as bytes; the client alone writes ``OUT``.
 
 A chunk's parts are written atomically, the rollouts part first, and a chunk counts
 as done when its scenes part exists: a run killed at any moment (SIGKILL included)
@@ -58,8 +59,8 @@ DRY_RUN_EXACT = 100_000
 LOOKAHEAD = 1024
 
 # What a sweep writes into its output folder; a folder holding anything else is refused.
-SWEEP_FILES = ("config.json", "scenes", "rollouts", ".*.tmp", ".lock")
 TABLES = ("scenes", "rollouts")
+SWEEP_FILES = ("config.json", *TABLES, ".*.tmp", ".lock")
 
 
 def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
@@ -197,9 +198,9 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         (out / name).mkdir(exist_ok=True)
     # A run killed in the middle of a write leaves its temporary file (output.write_atomic);
     # only this sweep writes into OUT, so any there now is such a leftover.
-    for stale in [*out.glob(".*.tmp"), *(out / "scenes").glob(".*.tmp"),
-                  *(out / "rollouts").glob(".*.tmp")]:
-        stale.unlink(missing_ok=True)
+    for folder in (out, *(out / name for name in TABLES)):
+        for stale in folder.glob(".*.tmp"):
+            stale.unlink(missing_ok=True)
     todo = [c for c in chunks if not tables.part_path(out, "scenes", c.index).exists()]
     summary = {"hash": h, "chunks": len(chunks), "done_before": len(chunks) - len(todo)}
     if not todo:

@@ -94,10 +94,3 @@ def parquet_bytes(table: pa.Table) -> bytes:
     sink = io.BytesIO()
     pq.write_table(table, sink)
     return sink.getvalue()
-
-
-def read(out: Path, table: str) -> pa.Table:
-    """One of a sweep's datasets (``scenes`` or ``rollouts``) as one table."""
-    import pyarrow.dataset as ds
-
-    return ds.dataset(Path(out) / table, format="parquet").to_table()

@@ -119,7 +119,18 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
     t0 = time.perf_counter()
     folder = Path(cache) if cache else default_cache()
     folder.mkdir(parents=True, exist_ok=True)
-    known: dict[tuple[str, int], object] = {}  # Settings per (scene's own, point)
+    settings = point_settings(points)
+    got = []
+    for ref in refs:
+        scene = ref if isinstance(ref, Scene) else random_scene(*ref)
+        got.append(_cached(scene, settings(scene, 0), folder))
+    return bake_batch(got, points, tasks, objects, time.perf_counter() - t0, settings)
+
+
+def point_settings(points: list[dict]):
+    """``settings(scene, k)``: the Settings of sweep point k for a scene, made once per
+    distinct scene [settings] table (every random scene shares one)."""
+    known: dict[tuple[str, int], object] = {}
 
     def settings(scene: Scene, k: int):
         key = (json.dumps(scene.settings_overrides, sort_keys=True, default=str), k)
@@ -127,18 +138,15 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
             known[key] = scene.settings(DEFAULTS, points[k])
         return known[key]
 
-    got = []
-    for ref in refs:
-        scene = ref if isinstance(ref, Scene) else random_scene(*ref)
-        got.append(_cached(scene, settings(scene, 0), folder))
-    return bake_batch(got, points, settings, tasks, objects, time.perf_counter() - t0)
+    return settings
 
 
-def bake_batch(got: list[tuple[PrecomputeResult, bool]], points: list[dict], settings,
-               tasks: int, objects: int, seconds: float) -> Batch:
+def bake_batch(got: list[tuple[PrecomputeResult, bool]], points: list[dict], tasks: int,
+               objects: int, seconds: float, settings=None) -> Batch:
     """A :class:`Batch` of precomputed scenes ((result, cache hit) pairs): each point's
-    bake (``settings(scene, k)``: point k's settings of a scene) at the sweep's sizes."""
+    bake at the sweep's sizes (``settings``: :func:`point_settings` of ``points``)."""
     t0 = time.perf_counter()
+    settings = settings or point_settings(points)
     bakes = [bake([replace(r, settings=settings(r.scene, k)) for r, _ in got], tasks,
                   max_objects=objects) for k in range(len(points))]
     results = [r for r, _ in got]
