@@ -25,6 +25,11 @@ TABLE_HALF = 0.30
 MAX_TASKS = 30
 MAX_RESTARTS = 100
 GAUSSIAN_SIGMA = 0.10
+# The version of what random_scene returns for given arguments. The precompute cache
+# keys a random scene by its arguments and this number (building a scene costs about
+# as much as reading its cached result), so any change to the scenes a seed gives must
+# raise it; tests/test_precompute_fast.py holds a digest of a few seeds' scenes.
+GENERATOR_VERSION = 1
 
 
 def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks: int = 10,

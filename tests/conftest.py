@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -16,10 +17,31 @@ from hypothesis import settings
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("MUJOCO_GL", "egl")  # before anything imports mujoco
-# Compiled programs of commands run by the tests go to a folder of this run, not the
-# user's cache (tests that study the cache set their own).
-os.environ.setdefault("SHACC_COMPILE_CACHE", tempfile.mkdtemp(prefix="shacc-test-compiled-"))
+# Compiled programs go to a folder of this run, not the user's cache (tests that study
+# the cache set their own). The folder is made by the first process (pytest-xdist's
+# workers inherit it) and removed by that process at the end.
+_COMPILED = None
+if "SHACC_COMPILE_CACHE" not in os.environ:
+    _COMPILED = tempfile.mkdtemp(prefix="shacc-test-compiled-")
+    os.environ["SHACC_COMPILE_CACHE"] = _COMPILED
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
+
+
+
+def pytest_configure(config):
+    """Every process of the run shares its compiled programs, as the commands do: the
+    programs the tests compile in this process, in the other pytest-xdist worker, in
+    the commands and in the Dask workers they start (programs loaded from the cache
+    are the ones compiled: the cache's own tests check that)."""
+    from sweeps import compile_cache
+
+    compile_cache.enable()
+
+
+def pytest_unconfigure(config):
+    if _COMPILED is not None and not hasattr(config, "workerinput"):
+        shutil.rmtree(_COMPILED, ignore_errors=True)
+
 
 settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)
 settings.load_profile("shacc")

@@ -4,6 +4,7 @@ precompute against its recorded boolean-era answers (tests/data)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import sys
@@ -17,7 +18,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
-from geometry_precompute import precompute
+from geometry_precompute import DEFAULTS, precompute, random_scene
 from geometry_precompute.clusters import clusters_from_pairs
 from geometry_precompute.clutteredness import clutteredness, overlap_volumes
 from geometry_precompute.frames import (
@@ -226,12 +227,46 @@ def recorded():
 def test_cache_key_names_the_precompute_version(monkeypatch):
     """Results cached before the fast volumes are computed again, not mixed in."""
     import sweeps.workers as workers
-    from geometry_precompute import DEFAULTS, random_scene
 
     sc = random_scene(3, "uniform", 3, 3)
     key = workers.cache_key(sc, DEFAULTS)
     monkeypatch.setattr(workers, "PRECOMPUTE_VERSION", 1)
     assert workers.cache_key(sc, DEFAULTS) != key
+
+
+def test_generator_output_is_the_versioned_one():
+    """The precompute cache keys random scenes by their arguments and GENERATOR_VERSION:
+    if this digest changes, so did the scenes a seed gives; raise the version (and
+    update the digest) so that no cached result of an older scene is read."""
+    from geometry_precompute.generate import GENERATOR_VERSION
+    from geometry_precompute.scene import scene_to_dict
+
+    scenes = [scene_to_dict(random_scene(i, k, 2, 12)) for i in range(4)
+              for k in ("uniform", "gaussian")]
+    digest = hashlib.sha256(json.dumps(scenes, sort_keys=True, default=str).encode())
+    assert (GENERATOR_VERSION, digest.hexdigest()) == (
+        1, "397f7cc60987b1df040ffc289fa26f109934bf1308aee49154235b210a7116d0")
+
+
+def test_random_scenes_are_cached_by_their_arguments(tmp_path, monkeypatch):
+    """A warm cache answers a random scene's arguments without building the scene, with
+    the result of the scene those arguments give; the key names the generator's and the
+    precompute's versions and the precompute settings."""
+    import sweeps.workers as workers
+
+    ref = (7, "gaussian", 4, 6)
+    first, hit = workers._cached(ref, DEFAULTS, tmp_path)
+    assert not hit
+    monkeypatch.setattr(workers, "random_scene", None)  # building a scene would fail now
+    again, hit = workers._cached(ref, DEFAULTS, tmp_path)
+    assert hit and again.scene == random_scene(*ref) == first.scene
+    assert [list(map(float, q)) for q in again.q_opt] == [list(map(float, q)) for q in first.q_opt]
+    assert again.C_final == first.C_final
+    key = workers.random_key(ref, DEFAULTS)
+    assert workers.random_key(ref, DEFAULTS.with_overrides({"shrink_step": 0.004})) != key
+    assert workers.random_key(ref, DEFAULTS.with_overrides({"v_max": 0.1})) == key
+    monkeypatch.setattr(workers, "GENERATOR_VERSION", 0)
+    assert workers.random_key(ref, DEFAULTS) != key
 
 
 def test_recorded_scenes_cover_the_set(recorded):
@@ -263,7 +298,6 @@ def test_precompute_answers_unchanged(recorded):
 def test_cached_start_draws_equal_the_generator():
     """The start orientations and search starts, drawn once per process, equal drawing
     them from a new generator each time (numpy's uniform is lo + (hi - lo) u)."""
-    from geometry_precompute import DEFAULTS, random_scene
     from geometry_precompute.starts import optimize_start_poses, start_orientations, start_plane
 
     for i in range(30):
