@@ -28,16 +28,6 @@ sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives besi
 
 
 
-def pytest_configure(config):
-    """Every process of the run shares its compiled programs, as the commands do: the
-    programs the tests compile in this process, in the other pytest-xdist worker, in
-    the commands and in the Dask workers they start (programs loaded from the cache
-    are the ones compiled: the cache's own tests check that)."""
-    from sweeps import compile_cache
-
-    compile_cache.enable()
-
-
 def pytest_unconfigure(config):
     if _COMPILED is not None and not hasattr(config, "workerinput"):
         shutil.rmtree(_COMPILED, ignore_errors=True)
