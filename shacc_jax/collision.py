@@ -1,22 +1,20 @@
-"""Gripper-object collisions through MJX's collision pipeline (SPEC sections 9, 12b).
+"""Gripper-object collisions (SPEC sections 9, 12b), exact, on the accelerator.
 
 The gripper is three capsules posed by the EE pose (p, R): two fingers parallel to
 the approach axis (EE z), at EE y = +-opening/2, from the palm (z = -finger_length)
 to the tool centre point p (z = 0), and a palm across them along EE y. Its
 dimensions are per-scene settings (``gripper.*``), so a sweep varies them without
-recompiling.
+recompiling. The objects are the scene's MuJoCo geoms (the exported MJCF's cylinders
+and boxes, same poses and sizes; a test reads them back from the MJCF).
 
-One small MJX model serves a whole batch: the world body holds ``O`` cylinder
-slots and (when any scene has a box) ``O`` box slots, the gripper is a free body.
-MJX's own pair filter (contype 1 on the gripper, conaffinity 1 on the objects)
-keeps exactly the gripper-object pairs. Per query, the object slots get the
-scene's poses and sizes (``Model.geom_size`` and ``Data.geom_xpos/xmat`` are
-plain arrays, so they are vmapped like any other input), unused slots are parked
-far below the table, and ``mjx.collision`` returns one signed distance per
-contact. MJX has no box-cylinder pair and approximates capsule-cylinder by a few
-gradient steps on the SDFs (its ``collision_sdf``), so the gripper is capsules
-only and a penetration counts when the deepest contact is below
-``-PENETRATION_EPS``; tests compare with CPU MuJoCo's ``mj_geomDistance``.
+A capsule penetrates a convex body by more than eps exactly when its axis segment
+comes within (radius - eps) of the body, so the check is a segment-to-solid distance:
+the distance to a cylinder or box is convex along the segment and a golden-section
+search finds its minimum to 1e-7 m. Every (capsule, object) pair of a pose is one
+array operation. This replaced MJX's collision pipeline, whose capsule-cylinder
+routine (a few gradient steps on the SDFs) reported distances up to 8 mm too large
+near contact and cost 250-330x a rollout (benchmarks/RESULTS.md). CPU MuJoCo's
+``mj_geomDistance`` on the same geoms is the reference in the tests.
 
 The table is not an obstacle: start poses a few centimetres above it in random
 orientations would otherwise collide before moving (docs/DECISIONS.md).
@@ -24,22 +22,16 @@ orientations would otherwise collide before moving (docs/DECISIONS.md).
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from geometry_precompute.schema import BOX, CYLINDER
+from geometry_precompute.schema import BOX
 
 from . import automaton as am
 from . import quaternion as quat
 
-PENETRATION_EPS = 1e-4  # m: deeper than rounding and MJX's SDF approximation at grazing
-# Where unused object slots wait. A tuple, not a jax array: importing this module must not
-# start a JAX backend (a process may import the package and never evaluate).
-PARKED = (0.0, 0.0, -100.0)
-N_GRIPPER = 3
+PENETRATION_EPS = 1e-4  # m: a penetration deeper than this is a collision
 
 
 def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
@@ -66,72 +58,81 @@ def gripper_reach(dims: Float[Array, "4"]) -> Array:
     return jnp.sqrt(length ** 2 + (0.5 * opening) ** 2) + jnp.maximum(r_f, r_p)
 
 
-def _mjcf(n_objects: int, boxes: bool) -> str:
-    slots = [f'<geom name="cyl{i}" type="cylinder" size="0.05 0.05" pos="0 0 -100" '
-             f'contype="0" conaffinity="1"/>' for i in range(n_objects)]
-    if boxes:
-        slots += [f'<geom name="box{i}" type="box" size="0.05 0.05 0.05" pos="0 0 -100" '
-                  f'contype="0" conaffinity="1"/>' for i in range(n_objects)]
-    capsule = 'type="capsule" size="0.01 0.02" contype="1" conaffinity="0"'
-    return "\n".join([
-        '<mujoco model="shacc_gripper_collisions">',
-        "  <worldbody>", *(f"    {s}" for s in slots),
-        '    <body name="gripper"><freejoint/>',
-        f'      <geom name="finger_a" {capsule}/>', f'      <geom name="finger_b" {capsule}/>',
-        f'      <geom name="palm" {capsule}/>',
-        "    </body>", "  </worldbody>", "</mujoco>", ""])
+# Golden-section iterations of the segment distance: the bracket ends at 0.618^30 of the
+# segment (1e-7 m for a 0.1 m palm), far below PENETRATION_EPS.
+GOLDEN_ITERATIONS = 30
+_INV_PHI = 0.6180339887498949
 
 
-@lru_cache(maxsize=16)
-def collision_model(n_objects: int, boxes: bool):
-    """(MjModel, mjx.Model, mjx.Data) with ``n_objects`` cylinder slots (and as many box
-    slots if ``boxes``), cached per layout: the layout is static, sizes and poses are
-    inputs."""
-    import mujoco
-    from mujoco import mjx
-
-    mj = mujoco.MjModel.from_xml_string(_mjcf(n_objects, boxes))
-    # Concrete arrays even when first called while tracing: the cache outlives the trace.
-    with jax.ensure_compile_time_eval():
-        m = mjx.put_model(mj)
-        return mj, m, mjx.make_data(m)
+def scene_objects(obj_kind, obj_center, obj_quat, obj_size, obj_mask):
+    """One scene's objects for :func:`deepest`: kinds (O,), centres (O, 3), rotation
+    matrices (O, 3, 3), sizes (O, 3) (a cylinder's [radius, half height, -], a box's
+    half extents) and the mask (O,)."""
+    return obj_kind, obj_center, jax.vmap(quat.to_matrix)(obj_quat), obj_size, obj_mask
 
 
-def object_geoms(obj_kind, obj_center, obj_quat, obj_size, obj_mask, boxes: bool):
-    """Slot poses and sizes for one scene's objects: (G, 3), (G, 3, 3), (G, 3)."""
-    mats = jax.vmap(quat.to_matrix)(obj_quat)
-    cyl = obj_mask & (obj_kind == CYLINDER)
-    parked = jnp.asarray(PARKED, obj_center.dtype)
-    pos = [jnp.where(cyl[:, None], obj_center, parked)]
-    size = [obj_size]
-    rot = [mats]
-    if boxes:
-        box = obj_mask & (obj_kind == BOX)
-        pos.append(jnp.where(box[:, None], obj_center, parked))
-        size.append(obj_size)
-        rot.append(mats)
-    return jnp.concatenate(pos), jnp.concatenate(rot), jnp.concatenate(size)
+def _point_distance(x, kind, size):
+    """Euclidean distance from points x (..., 3), in an object's frame, to the solid
+    cylinder or box (0 inside)."""
+    radial = jnp.sqrt(x[..., 0] ** 2 + x[..., 1] ** 2)
+    dr = jnp.maximum(radial - size[..., 0], 0.0)
+    dz = jnp.maximum(jnp.abs(x[..., 2]) - size[..., 1], 0.0)
+    out = jnp.maximum(jnp.abs(x) - size, 0.0)
+    return jnp.where(kind == BOX, jnp.sqrt(jnp.sum(out * out, axis=-1)),
+                     jnp.sqrt(dr * dr + dz * dz))
 
 
-def deepest(model, data, objects, p: Float[Array, "3"], q: Float[Array, "4"],
+def segment_distance(a, d, kind, size):
+    """Distance from segments a + t d, t in [0, 1] (..., 3, object frame), to solid
+    cylinders or boxes: golden-section search over t. The distance to a convex body is
+    convex along a segment, so the search brackets the minimum; the result is within
+    |d| 0.618^GOLDEN_ITERATIONS above the exact distance, never below it."""
+    def f(t):
+        return _point_distance(a + t[..., None] * d, kind, size)
+
+    zero = jnp.zeros(a.shape[:-1], a.dtype)
+    one = jnp.ones_like(zero)
+    lo, hi = zero, one
+    x1, x2 = hi - _INV_PHI, lo + _INV_PHI
+    f1, f2 = f(x1), f(x2)
+
+    def shrink(_, state):
+        lo, hi, x1, x2, f1, f2 = state
+        left = f1 <= f2  # the minimum lies in [lo, x2]
+        lo, hi = jnp.where(left, lo, x1), jnp.where(left, x2, hi)
+        new = jnp.where(left, hi - _INV_PHI * (hi - lo), lo + _INV_PHI * (hi - lo))
+        f_new = f(new)
+        x1, x2 = jnp.where(left, new, x2), jnp.where(left, x1, new)
+        f1, f2 = jnp.where(left, f_new, f2), jnp.where(left, f1, f_new)
+        return lo, hi, x1, x2, f1, f2
+
+    *_, f1, f2 = jax.lax.fori_loop(0, GOLDEN_ITERATIONS, shrink, (lo, hi, x1, x2, f1, f2))
+    return jnp.minimum(jnp.minimum(f1, f2), jnp.minimum(f(zero), f(one)))
+
+
+def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"],
             dims: Float[Array, "4"]) -> Array:
-    """Smallest signed distance between the gripper at (p, q) and any object: MJX's
-    ``collision`` on the batch model. ``objects`` is ``object_geoms``' output."""
-    from mujoco import mjx
-
-    o_pos, o_mat, o_size = objects
+    """Smallest (capsule axis to object distance - capsule radius) over the gripper's
+    capsules and the scene's objects (``scene_objects``' output), at the EE pose (p, q).
+    Where a capsule and an object are apart this is their distance, as CPU MuJoCo's
+    ``mj_geomDistance`` reports it; where they overlap it is at most minus the depth
+    of the overlap's smallest separating move short of the capsule radius, and it is
+    below -eps exactly when MuJoCo's penetration depth exceeds eps (a capsule overlaps
+    a convex body by more than eps iff its axis comes within radius - eps of it)."""
+    kind, centre, mat, size, mask = objects
     g_pos, g_mat, g_size = gripper_geoms(p, q, dims)
-    dtype = p.dtype
-    g_size3 = jnp.concatenate([g_size, jnp.zeros((N_GRIPPER, 1), dtype)], axis=1)
-    m = model.replace(geom_size=jnp.concatenate([o_size, g_size3]).astype(dtype))
-    d = data.replace(geom_xpos=jnp.concatenate([o_pos, g_pos]).astype(dtype),
-                     geom_xmat=jnp.concatenate([o_mat, g_mat]).astype(dtype))
-    d = mjx.collision(m, d)
-    return jnp.min(d._impl.contact.dist)
+    axis = g_mat[:, :, 2] * g_size[:, 1:2]  # (3, 3): half the capsule's axis
+    a = g_pos - axis
+    # Into each object's frame: (capsules, objects, 3).
+    a_loc = jnp.einsum("oji,coj->coi", mat, a[:, None, :] - centre[None, :, :])
+    d_loc = jnp.einsum("oji,cj->coi", mat, 2.0 * axis)
+    dist = segment_distance(a_loc, d_loc, kind[None, :], size[None, :, :])
+    gap = dist - g_size[:, 0:1]
+    return jnp.min(jnp.where(mask[None, :], gap, jnp.inf))
 
 
-def penetrates(model, data, objects, p, q, dims) -> Bool[Array, ""]:
-    return deepest(model, data, objects, p, q, dims) < -PENETRATION_EPS
+def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
+    return deepest(objects, p, q, dims) < -PENETRATION_EPS
 
 
 def window_start(obj_kind, obj_center, obj_size, obj_mask, gripper: Float[Array, "4"],

@@ -124,17 +124,15 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
     (m_from, m_to), (c_from, c_to), w_from, length = _windows(
         geometry, params, lanes, act.step.reshape(L), prep, collide)
     if collide:
-        _, model, data = col.collision_model(layout.n_objects, layout.box_objects)
-        objects = jax.vmap(lambda g: col.object_geoms(
-            g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask,
-            layout.box_objects))(geometry)
+        objects = jax.vmap(lambda g: col.scene_objects(
+            g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
         gripper = params.gripper()
 
     def penetrates(i, k, q):
         s = lanes.scene[i]
         p = am.sample(jax.tree.map(lambda a: a[i], lanes.path), k)
         obj = jax.tree.map(lambda a: a[s], objects)
-        return col.penetrates(model, data, obj, p, q, gripper[s])
+        return col.penetrates(obj, p, q, gripper[s])
 
     def per_block(formula, idx, start, valid, rows):
         r_b, n_b, hit_b = rows
