@@ -149,7 +149,7 @@ _DOCS = {
     "start_z_range": "start plane's height band [low, high], m",
     "start_orientation": "start orientations: random (seeded) or forward (approach +x)",
     "seed": "seed of the random start orientations",
-    "collision": "gripper collision checking: off, or mjx (MuJoCo MJX)",
+    "collision": "gripper collision checking: off, or mjx (exact capsule checks, as MuJoCo)",
     "gripper.finger_length": "collision gripper: finger capsule length, m",
     "gripper.finger_radius": "collision gripper: finger capsule radius, m",
     "gripper.opening": "collision gripper: distance between the finger axes, m",

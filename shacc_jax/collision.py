@@ -4,8 +4,8 @@ The gripper is three capsules posed by the EE pose (p, R): two fingers parallel 
 the approach axis (EE z), at EE y = +-opening/2, from the palm (z = -finger_length)
 to the tool centre point p (z = 0), and a palm across them along EE y. Its
 dimensions are per-scene settings (``gripper.*``), so a sweep varies them without
-recompiling. The objects are the scene's MuJoCo geoms (the exported MJCF's cylinders
-and boxes, same poses and sizes; a test reads them back from the MJCF).
+recompiling. The objects are the scene's cylinders and boxes, posed and sized as in
+the exported MJCF.
 
 A capsule penetrates a convex body by more than eps exactly when its axis segment
 comes within (radius - eps) of the body, so the check is a segment-to-solid distance:

@@ -27,7 +27,6 @@ if "SHACC_COMPILE_CACHE" not in os.environ:
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
 
 
-
 def pytest_unconfigure(config):
     if _COMPILED is not None and not hasattr(config, "workerinput"):
         shutil.rmtree(_COMPILED, ignore_errors=True)
