@@ -96,17 +96,15 @@ def segment_distance(a, d, kind, size):
     x1, x2 = hi - _INV_PHI, lo + _INV_PHI
     f1, f2 = f(x1), f(x2)
 
-    def shrink(_, state):
-        lo, hi, x1, x2, f1, f2 = state
+    # Unrolled: one fused elementwise program instead of a loop whose every iteration
+    # writes the whole bracket state to memory (see benchmarks/RESULTS.md).
+    for _ in range(GOLDEN_ITERATIONS):
         left = f1 <= f2  # the minimum lies in [lo, x2]
         lo, hi = jnp.where(left, lo, x1), jnp.where(left, x2, hi)
         new = jnp.where(left, hi - _INV_PHI * (hi - lo), lo + _INV_PHI * (hi - lo))
         f_new = f(new)
         x1, x2 = jnp.where(left, new, x2), jnp.where(left, x1, new)
         f1, f2 = jnp.where(left, f_new, f2), jnp.where(left, f1, f_new)
-        return lo, hi, x1, x2, f1, f2
-
-    *_, f1, f2 = jax.lax.fori_loop(0, GOLDEN_ITERATIONS, shrink, (lo, hi, x1, x2, f1, f2))
     return jnp.minimum(jnp.minimum(f1, f2), jnp.minimum(f(zero), f(one)))
 
 
@@ -135,20 +133,158 @@ def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
     return deepest(objects, p, q, dims) < -PENETRATION_EPS
 
 
-def window_start(obj_kind, obj_center, obj_size, obj_mask, gripper: Float[Array, "4"],
-                 path: am.Path, max_steps: Array) -> Array:
-    """First sample at which the gripper's bounding sphere (about p) reaches an object's
-    bounding sphere; inf if none. A penetration needs that, so the samples before it
-    are skipped without loss. One scene's objects, one path."""
-    size = obj_size
-    r_obj = jnp.where(obj_kind == BOX, jnp.linalg.norm(size, axis=-1),
-                      jnp.hypot(size[:, 0], size[:, 1]))
-    reach = gripper_reach(gripper) + r_obj + 1e-3
-    rel = obj_center - path.p0
-    b = rel @ path.u
-    disc = b * b - (jnp.sum(rel * rel, axis=-1) - reach * reach)
-    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+# Slack of the path cull (m): far above float32 rounding of metre-scale coordinates.
+CULL_MARGIN = 1e-3
+_TINY = 1e-12
+
+
+def _linear_interval(a, b, lo, hi):
+    """The t with lo <= a t + b <= hi, as (from, to); empty when from > to."""
     inf = jnp.asarray(jnp.inf, b.dtype)
-    ok = obj_mask & (disc >= 0)
-    lo, hi = jnp.where(ok, b - root, inf), jnp.where(ok, b + root, -inf)
-    return jnp.min(am.first_sample(lo, hi, jnp.zeros((), b.dtype), path, max_steps))
+    flat = jnp.abs(a) <= _TINY
+    safe = jnp.where(flat, 1.0, a)
+    t1, t2 = (lo - b) / safe, (hi - b) / safe
+    inside = (b >= lo) & (b <= hi)
+    return (jnp.where(flat, jnp.where(inside, -inf, inf), jnp.minimum(t1, t2)),
+            jnp.where(flat, jnp.where(inside, inf, -inf), jnp.maximum(t1, t2)))
+
+
+def _line_sphere(u, c, rho):
+    """The t with |t u - c| <= rho (u a unit vector or zero)."""
+    inf = jnp.asarray(jnp.inf, rho.dtype)
+    b = jnp.sum(u * c, axis=-1)
+    uu = jnp.sum(u * u, axis=-1)
+    disc = b * b - uu * (jnp.sum(c * c, axis=-1) - rho * rho)
+    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+    moving = uu > _TINY
+    safe = jnp.where(moving, uu, 1.0)
+    still = jnp.sum(c * c, axis=-1) <= rho * rho  # u = 0: all t or none
+    lo = jnp.where(moving, jnp.where(disc >= 0, (b - root) / safe, inf),
+                   jnp.where(still, -inf, inf))
+    hi = jnp.where(moving, jnp.where(disc >= 0, (b + root) / safe, -inf),
+                   jnp.where(still, inf, -inf))
+    return lo, hi
+
+
+def _line_capsule(u, a, e, rho):
+    """The t with dist(t u, segment [a, a + e]) <= rho: the capsule's two end spheres
+    and its body (an infinite cylinder cut by the slab of the segment). The union is
+    convex, so its t form one interval."""
+    inf = jnp.asarray(jnp.inf, rho.dtype)
+    lo_a, hi_a = _line_sphere(u, a, rho)
+    lo_b, hi_b = _line_sphere(u, a + e, rho)
+    length = jnp.sqrt(jnp.sum(e * e, axis=-1))
+    axis = e / jnp.maximum(length, _TINY)[..., None]
+    ua, aa = jnp.sum(u * axis, axis=-1), jnp.sum(a * axis, axis=-1)
+    up, ap = u - ua[..., None] * axis, a - aa[..., None] * axis
+    A = jnp.sum(up * up, axis=-1)
+    B = jnp.sum(up * ap, axis=-1)
+    disc = B * B - A * (jnp.sum(ap * ap, axis=-1) - rho * rho)
+    ok = (A > _TINY) & (disc >= 0)  # near-parallel lines: the end spheres cover them
+    safe = jnp.where(ok, A, 1.0)
+    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+    s_lo, s_hi = _linear_interval(ua, -aa, 0.0, length)
+    lo_c = jnp.maximum(jnp.where(ok, (B - root) / safe, inf), s_lo)
+    hi_c = jnp.minimum(jnp.where(ok, (B + root) / safe, -inf), s_hi)
+    body = lo_c <= hi_c
+    lo = jnp.minimum(jnp.minimum(lo_a, lo_b), jnp.where(body, lo_c, inf))
+    hi = jnp.maximum(jnp.maximum(hi_a, hi_b), jnp.where(body, hi_c, -inf))
+    return lo, hi
+
+
+def _line_rounded_parallelogram(u, c0, e1, e2, rho):
+    """The t with dist(t u, {c0 + x e1 + y e2 : x, y in [0, 1]}) <= rho: the four edge
+    capsules and the slab of thickness 2 rho over the parallelogram's face. Convex, so
+    one interval (from, to), empty when from > to."""
+    inf = jnp.asarray(jnp.inf, rho.dtype)
+    lo, hi = inf, -inf
+    for a, e in ((c0, e1), (c0 + e2, e1), (c0, e2), (c0 + e1, e2)):
+        l, h = _line_capsule(u, a, e, rho)
+        lo, hi = jnp.minimum(lo, l), jnp.maximum(hi, h)
+    n = jnp.cross(e1, e2)
+    area = jnp.sqrt(jnp.sum(n * n, axis=-1))
+    flat = area > 1e-6  # a thinner face lies within 1e-6 m of its edges
+    safe = jnp.where(flat, area, 1.0)[..., None]
+    n = n / safe
+    m1, m2 = jnp.cross(e2, n) / safe, jnp.cross(n, e1) / safe  # dual basis of the face
+    f_lo, f_hi = _linear_interval(jnp.sum(u * n, -1), -jnp.sum(c0 * n, -1), -rho, rho)
+    for m in (m1, m2):
+        l, h = _linear_interval(jnp.sum(u * m, -1), -jnp.sum(c0 * m, -1), 0.0, 1.0)
+        f_lo, f_hi = jnp.maximum(f_lo, l), jnp.minimum(f_hi, h)
+    face = flat & (f_lo <= f_hi)
+    return (jnp.minimum(lo, jnp.where(face, f_lo, inf)),
+            jnp.maximum(hi, jnp.where(face, f_hi, -inf)))
+
+
+def bounding_capsules(obj_kind, obj_center, obj_quat, obj_size):
+    """Each object's bounding capsule: its axis segment's start (O, 3) and extent
+    (O, 3), and its radius (O,). A cylinder's is its own axis with its radius; a box's
+    runs along its longest half extent."""
+    mats = jax.vmap(quat.to_matrix)(obj_quat)
+    longest = jnp.argmax(obj_size, axis=-1)
+    box_axis = jnp.take_along_axis(mats, longest[:, None, None], axis=2)[:, :, 0]
+    box_half = jnp.max(obj_size, axis=-1)
+    box_radius = jnp.sqrt(jnp.maximum(jnp.sum(obj_size ** 2, axis=-1) - box_half ** 2, 0.0))
+    is_box = obj_kind == BOX
+    half = jnp.where(is_box[:, None], box_axis * box_half[:, None],
+                     mats[:, :, 2] * obj_size[:, 1:2])
+    radius = jnp.where(is_box, box_radius, obj_size[:, 0])
+    return obj_center - half, 2.0 * half, radius
+
+
+def last_sample(lo: Array, hi: Array, path: am.Path, max_steps: Array) -> Array:
+    """Last sample index <= max_steps whose t = min(k s, D) lies in [lo, hi]; -inf if
+    none (the counterpart of ``automaton.first_sample``)."""
+    inf = jnp.asarray(jnp.inf, path.length.dtype)
+    steps = max_steps.astype(path.length.dtype)
+    rests = (lo <= path.length) & (path.length <= hi) & (path.landing <= steps)
+    k = jnp.minimum(jnp.minimum(jnp.floor(hi / path.step_length), path.landing - 1.0), steps)
+    on_segment = (k >= 0) & (k * path.step_length >= lo)
+    return jnp.where(rests, steps, jnp.where(on_segment, k, -inf))
+
+
+def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
+                gripper: Float[Array, "4"], r0: Float[Array, "4"], path: am.Path,
+                turn_from: Array, max_steps: Array) -> tuple[Array, Array]:
+    """(first, last) sample of one path at which the gripper can touch an object;
+    empty when first > last. One scene's objects, one path.
+
+    Before ``turn_from`` (the first sample at which the meta skill may rotate; inf
+    without one) the gripper keeps the start orientation ``r0`` and moves along the
+    straight path, so each capsule's axis sweeps a parallelogram and it can reach an
+    object only where its axis comes within (capsule radius + the object's bounding
+    capsule radius) of the object's bounding axis: one interval of t per (capsule,
+    object) pair, in closed form. From ``turn_from`` on the orientation is not known
+    beforehand, and the gripper's bounding sphere about p against the object's
+    bounding sphere decides. Both are necessary for a penetration, so no sample that
+    can collide is left out."""
+    dtype = path.length.dtype
+    inf = jnp.asarray(jnp.inf, dtype)
+    start, extent, radius = bounding_capsules(obj_kind, obj_center, obj_quat, obj_size)
+    g_pos, g_mat, g_size = gripper_geoms(path.p0, r0, gripper)
+    axis = g_mat[:, :, 2] * g_size[:, 1:2]
+    # Pairs (capsules, objects): t u within rho of the parallelogram of axis offsets.
+    c0 = start[None, :, :] - (g_pos - axis)[:, None, :]
+    rho = g_size[:, 0:1] + radius[None, :] + CULL_MARGIN
+    lo, hi = _line_rounded_parallelogram(path.u, c0, jnp.broadcast_to(extent, c0.shape),
+                                         jnp.broadcast_to(-2.0 * axis[:, None, :], c0.shape),
+                                         rho)
+    lo, hi = jnp.where(obj_mask[None, :], lo, inf), jnp.where(obj_mask[None, :], hi, -inf)
+    zero = jnp.zeros((), dtype)
+    first = jnp.min(am.first_sample(lo, hi, zero, path, max_steps))
+    last = jnp.minimum(jnp.max(last_sample(lo, hi, path, max_steps)), turn_from - 1.0)
+    first = jnp.where(first <= last, first, inf)
+    # From turn_from on: bounding spheres.
+    r_obj = jnp.where(obj_kind == BOX, jnp.linalg.norm(obj_size, axis=-1),
+                      jnp.hypot(obj_size[:, 0], obj_size[:, 1]))
+    reach = gripper_reach(gripper) + r_obj + CULL_MARGIN
+    s_lo, s_hi = _line_sphere(path.u, obj_center - path.p0, reach)
+    s_lo, s_hi = jnp.where(obj_mask, s_lo, inf), jnp.where(obj_mask, s_hi, -inf)
+    kmin = jnp.where(jnp.isfinite(turn_from), turn_from, inf)
+    s_first = jnp.min(am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps + 1.0),
+                                      path, max_steps))
+    s_first = jnp.where(jnp.isfinite(kmin), s_first, inf)
+    s_last = jnp.where(jnp.isfinite(s_first),
+                       jnp.max(last_sample(s_lo, s_hi, path, max_steps)), -inf)
+    return jnp.minimum(first, s_first), jnp.maximum(jnp.where(jnp.isfinite(first), last, -inf),
+                                                    s_last)

@@ -66,7 +66,7 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
     dtype = geometry.starts.dtype
     inf = jnp.asarray(jnp.inf, dtype)
 
-    def one(s, path, k_act):
+    def one(s, n, path, k_act):
         g = jax.tree.map(lambda a: a[s], geometry)
         p = jax.tree.map(lambda a: a[s], params)
         x = _numbers(p, dtype)
@@ -77,15 +77,18 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
         else:
             m_from, m_to = inf, -inf
         if collide:
-            start = col.window_start(g.obj_kind, g.obj_center, g.obj_size, g.obj_mask,
-                                     p.gripper(), path, x["max_steps"])
-            c_from = jnp.where(p.collision, start, inf)
-            c_to = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
+            turn_from = jnp.where(m_from <= m_to, m_from, inf)
+            first, last = col.path_window(g.obj_kind, g.obj_center, g.obj_quat, g.obj_size,
+                                          g.obj_mask, p.gripper(), g.starts[n, 3:], path,
+                                          turn_from, x["max_steps"])
+            c_from = jnp.where(p.collision, first, inf)
+            end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
+            c_to = jnp.minimum(last, end)
         else:
             c_from, c_to = inf, -inf
         return m_from, m_to, c_from, c_to
 
-    m_from, m_to, c_from, c_to = jax.vmap(one)(lanes.scene, lanes.path, act_step)
+    m_from, m_to, c_from, c_to = jax.vmap(one)(lanes.scene, lanes.start, lanes.path, act_step)
     # Padded target tasks get an empty window: their outcome is INVALID anyway, and in a
     # batch of 5- to 10-task scenes padded to 10 they are up to half of the lanes.
     real = geometry.task_mask[lanes.scene, lanes.task]

@@ -8,12 +8,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from reference_automaton import OUTCOME_NAMES, Collider, rollout
 from scipy.spatial.transform import Rotation
 from test_automaton import compare, reference_table, run
 
 import shacc_jax
 from geometry_precompute import bake, precompute, scene_from_dict
+from geometry_precompute.schema import BOX, CYLINDER
+from shacc_jax import automaton as am
 from shacc_jax import collision as col
 from shacc_jax.types import COLLISION, SUCCESS, Geometry, Params
 
@@ -201,3 +205,103 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
              f"loaded = [m for m in {heavy}[1:] + ('scipy.spatial',) if m in sys.modules]\n"
              "assert not loaded, loaded\n")
     subprocess.run([sys.executable, "-c", alone], check=True)
+
+
+def _point_parallelogram_distance(x, c0, e1, e2):
+    """NumPy reference: distance from x to {c0 + a e1 + b e2 : a, b in [0, 1]}, the
+    least of the face's interior solution (where it lies inside) and the four edges."""
+    best = np.inf
+    G = np.array([[e1 @ e1, e1 @ e2], [e1 @ e2, e2 @ e2]])
+    if abs(np.linalg.det(G)) > 1e-14:
+        a, b = np.linalg.solve(G, [e1 @ (x - c0), e2 @ (x - c0)])
+        if 0 <= a <= 1 and 0 <= b <= 1:
+            best = np.linalg.norm(c0 + a * e1 + b * e2 - x)
+    for start, e in ((c0, e1), (c0 + e2, e1), (c0, e2), (c0 + e1, e2)):
+        s = np.clip((x - start) @ e / (e @ e), 0.0, 1.0)
+        best = min(best, np.linalg.norm(start + s * e - x))
+    return best
+
+
+@given(seed=st.integers(0, 10_000), parallel=st.booleans())
+def test_swept_capsule_interval_is_exact(seed, parallel):
+    """The closed-form set of t at which t u comes within rho of a parallelogram (the
+    Minkowski difference of two capsule axes) against a dense scan of t with the NumPy
+    distance; ``parallel`` makes the two axes parallel (a degenerate face)."""
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=3)
+    u /= np.linalg.norm(u)
+    c0, e1 = rng.uniform(-0.2, 0.2, 3), rng.normal(size=3) * 0.1
+    e2 = -0.7 * e1 if parallel else rng.normal(size=3) * 0.1
+    rho = rng.uniform(0.01, 0.1)
+    lo, hi = (float(v) for v in jax.jit(col._line_rounded_parallelogram)(
+        *(jnp.asarray(a, jnp.float64 if jax.config.x64_enabled else jnp.float32)
+          for a in (u, c0, e1, e2, rho))))
+    ts = np.linspace(-0.6, 0.6, 2401)
+    d = np.array([_point_parallelogram_distance(t * u, c0, e1, e2) for t in ts])
+    inside = ts[d <= rho - 1e-5]
+    outside = ts[d > rho + 1e-5]
+    if inside.size:
+        assert lo <= inside.min() and inside.max() <= hi
+        assert lo > inside.min() - 1e-3 and hi < inside.max() + 1e-3  # and tight
+    assert not ((outside >= lo) & (outside <= hi)).any()
+
+
+@given(seed=st.integers(0, 10_000))
+def test_path_window_holds_every_penetrating_sample(seed):
+    """Random objects (cylinders and boxes, any orientation), random straight paths and
+    start orientations, half of them axis-aligned (parallel axes, degenerate faces):
+    every sample at which the exact check finds a penetration lies in the window that
+    ``path_window`` computes in closed form (its tightness is the interval's, tested
+    above)."""
+    rng = np.random.default_rng(seed)
+    O, n, steps = 4, 64, STEPS
+    kind = rng.choice([CYLINDER, BOX], O)
+    centre = rng.uniform([-0.15, -0.15, 0.0], [0.15, 0.15, 0.1], (O, 3))
+    aligned = seed % 2 == 0
+    quat = (np.tile([1.0, 0, 0, 0], (O, 1)) if aligned
+            else np.roll(Rotation.random(O, random_state=rng).as_quat(), 1, axis=1))
+    size = rng.uniform(0.01, 0.08, (O, 3))
+    p0 = rng.uniform(-0.3, 0.3, (n, 3))
+    if aligned:
+        c0 = p0.copy()
+        c0[np.arange(n), rng.integers(0, 3, n)] += rng.choice([-0.5, 0.5], n)
+        turns = [Rotation.identity(), Rotation.from_euler("x", 90, degrees=True),
+                 Rotation.from_euler("y", 90, degrees=True)]
+        r0 = np.stack([np.roll(turns[i].as_quat(), 1) for i in rng.integers(0, 3, n)])
+    else:
+        c0 = rng.uniform(-0.2, 0.2, (n, 3))
+        r0 = np.roll(Rotation.random(n, random_state=rng).as_quat(), 1, axis=1)
+    first, last, pen = _window_and_penetrations(
+        jnp.asarray(kind), *(jnp.asarray(a, jnp.float32) for a in (centre, quat, size, p0, c0, r0)))
+    k = np.arange(steps + 1)
+    inside = (k[None] >= np.asarray(first)[:, None]) & (k[None] <= np.asarray(last)[:, None])
+    pen = np.asarray(pen)
+    assert not (pen & ~inside).any()
+
+
+STEPS = 120
+
+
+@jax.jit
+def _window_and_penetrations(kind, centre, quat, size, p0, c0, r0):
+    """Each path's window and, at each of its samples, whether the gripper (in its
+    start orientation) penetrates an object."""
+    gripper = jnp.asarray([0.1, 0.01, 0.08, 0.012], jnp.float32)
+    mask = jnp.ones(kind.shape, bool)
+    steps = jnp.asarray(float(STEPS), jnp.float32)
+    objects = col.scene_objects(kind, centre, quat, size, mask)
+
+    def one(p0, c0, r0):
+        diff = c0 - p0
+        length = jnp.linalg.norm(diff)
+        s = jnp.asarray(0.005, jnp.float32)
+        path = am.Path(p0, c0, diff / length, length,
+                       jnp.minimum(jnp.ceil(length / s), steps + 1), s)
+        first, last = col.path_window(kind, centre, quat, size, mask, gripper, r0, path,
+                                      jnp.asarray(jnp.inf, jnp.float32), steps)
+        pen = jax.vmap(lambda k: col.penetrates(objects, am.sample(path, k), r0, gripper))(
+            jnp.arange(STEPS + 1.0))
+        return first, last, pen
+
+    return jax.vmap(one)(p0, c0, r0)
+
