@@ -10,11 +10,15 @@ the exported MJCF.
 A capsule penetrates a convex body by more than eps exactly when its axis segment
 comes within (radius - eps) of the body, so the check is a segment-to-solid distance:
 the distance to a cylinder or box is convex along the segment and a golden-section
-search finds its minimum to 1e-7 m. Every (capsule, object) pair of a pose is one
-array operation. This replaced MJX's collision pipeline, whose capsule-cylinder
-routine (a few gradient steps on the SDFs) reported distances up to 8 mm too large
-near contact and cost 250-330x a rollout (benchmarks/RESULTS.md). CPU MuJoCo's
-``mj_geomDistance`` on the same geoms is the reference in the tests.
+search finds its minimum to 1e-7 m. This replaced MJX's collision pipeline, whose
+capsule-cylinder routine (a few gradient steps on the SDFs) reported distances up to
+8 mm too large near contact and cost 250-1 100x a rollout (benchmarks/RESULTS.md). CPU
+MuJoCo's ``mj_geomDistance`` on the same geoms is the reference in the tests.
+
+Most of the work is skipped without changing an outcome: :func:`path_window` keeps only
+the samples of a rollout at which the gripper can reach an object (closed form), and
+:func:`sample_penetrations` runs the search only on the (pose, capsule, object) pairs
+that a closed-form :func:`lower_bound` does not clear.
 
 The table is not an obstacle: start poses a few centimetres above it in random
 orientations would otherwise collide before moving (docs/DECISIONS.md).
@@ -108,6 +112,26 @@ def segment_distance(a, d, kind, size):
     return jnp.minimum(jnp.minimum(f1, f2), jnp.minimum(f(zero), f(one)))
 
 
+def _into_frames(mat, v):
+    """v (..., 3) in the frames whose rotation matrices are mat (..., 3, 3): mat^T v,
+    written out as products and sums so that it fuses with what follows."""
+    return (v[..., 0:1] * mat[..., 0, :] + v[..., 1:2] * mat[..., 1, :]
+            + v[..., 2:3] * mat[..., 2, :])
+
+
+def pair_axes(objects, p: Float[Array, "3"], q: Float[Array, "4"],
+              dims: Float[Array, "4"]) -> tuple[Array, Array, Array]:
+    """The gripper's capsule axes at the EE pose (p, q) in each object's frame: starts
+    (3, O, 3) and extents (3, O, 3), as segments a + t d, t in [0, 1]; and the
+    capsules' radii (3,). ``objects``: :func:`scene_objects`' output."""
+    _, centre, mat, _, _ = objects
+    g_pos, g_mat, g_size = gripper_geoms(p, q, dims)
+    axis = g_mat[:, :, 2] * g_size[:, 1:2]  # (3, 3): half the capsule's axis
+    a_loc = _into_frames(mat[None], (g_pos - axis)[:, None, :] - centre[None, :, :])
+    d_loc = _into_frames(mat[None], 2.0 * axis[:, None, :])
+    return a_loc, d_loc, g_size[:, 0]
+
+
 def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"],
             dims: Float[Array, "4"]) -> Array:
     """Smallest (capsule axis to object distance - capsule radius) over the gripper's
@@ -117,16 +141,88 @@ def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"],
     of the overlap's smallest separating move short of the capsule radius, and it is
     below -eps exactly when MuJoCo's penetration depth exceeds eps (a capsule overlaps
     a convex body by more than eps iff its axis comes within radius - eps of it)."""
-    kind, centre, mat, size, mask = objects
-    g_pos, g_mat, g_size = gripper_geoms(p, q, dims)
-    axis = g_mat[:, :, 2] * g_size[:, 1:2]  # (3, 3): half the capsule's axis
-    a = g_pos - axis
-    # Into each object's frame: (capsules, objects, 3).
-    a_loc = jnp.einsum("oji,coj->coi", mat, a[:, None, :] - centre[None, :, :])
-    d_loc = jnp.einsum("oji,cj->coi", mat, 2.0 * axis)
+    kind, _, _, size, mask = objects
+    a_loc, d_loc, radius = pair_axes(objects, p, q, dims)
     dist = segment_distance(a_loc, d_loc, kind[None, :], size[None, :, :])
-    gap = dist - g_size[:, 0:1]
+    gap = dist - radius[:, None]
     return jnp.min(jnp.where(mask[None, :], gap, jnp.inf))
+
+
+def lower_bound(a, d, kind, size):
+    """A lower bound of the distance from segments a + t d (..., 3, object frame) to
+    solid cylinders or boxes, in closed form: per box axis, or for a cylinder along its
+    axis and radially, the gap between the segment's range and the solid's; the
+    Euclidean norm of the gaps bounds every point's distance from below."""
+    lo, hi = jnp.minimum(a, a + d), jnp.maximum(a, a + d)
+    gaps = jnp.maximum(jnp.maximum(lo - size, -size - hi), 0.0)
+    box = jnp.sqrt(jnp.sum(gaps * gaps, axis=-1))
+    dxy = d[..., :2]
+    t = jnp.clip(-jnp.sum(a[..., :2] * dxy, -1) / jnp.maximum(jnp.sum(dxy * dxy, -1), _TINY),
+                 0.0, 1.0)
+    radial = jnp.sqrt(jnp.sum((a[..., :2] + t[..., None] * dxy) ** 2, axis=-1))
+    gap_r = jnp.maximum(radial - size[..., 0], 0.0)
+    gap_z = jnp.maximum(jnp.maximum(lo[..., 2] - size[..., 1], -size[..., 1] - hi[..., 2]), 0.0)
+    return jnp.where(kind == BOX, box, jnp.sqrt(gap_r * gap_r + gap_z * gap_z))
+
+
+# Share of the (sample, capsule, object) pairs a round of the exact search takes (on
+# random 10-task scenes 1.6 % of the pairs pass the lower bound).
+ROUND_SHARE = 32
+
+
+def sample_penetrations(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"],
+                        dims: Float[Array, "B 4"], live: Bool[Array, "B W"]
+                        ) -> Bool[Array, "B W"]:
+    """Whether the gripper penetrates an object by more than eps at each of W poses of
+    B lanes (``objects``: each lane's scene, :func:`scene_objects`' output with a
+    leading B axis), where ``live``: :func:`penetrates`' decision, pose by pose.
+
+    The closed-form :func:`lower_bound` clears most (pose, capsule, object) pairs; the
+    rest, those that can penetrate, are numbered (a running count over the poses, then
+    over each pose's pairs), gathered into rounds of 1/ROUND_SHARE of all pairs and
+    searched exactly, as many rounds as they need. (Looking each round's pairs up by a
+    binary search of the running count instead of scattering them was slower on an
+    H100: benchmarks/RESULTS.md.)"""
+    kind, _, _, size, mask = objects
+    B, W = live.shape
+    C, O = 3, kind.shape[1]
+    per_pose = jax.vmap(jax.vmap(pair_axes, (None, 0, 0, None)), (0, 0, 0, 0))
+    a, d, radius = per_pose(objects, p, q, dims)  # (B, W, C, O, 3), (B, W, C)
+    bound = lower_bound(a, d, kind[:, None, None, :], size[:, None, None, :, :])
+    candidate = (live[:, :, None, None] & mask[:, None, None, :]
+                 & (bound < radius[..., None] - PENETRATION_EPS + 1e-6))
+    # 1e-6 m of slack: the bound's rounding must not clear a pair the search finds.
+    candidate = candidate.reshape(B * W, C * O)
+    count = jnp.sum(candidate, axis=1, dtype=jnp.int32)
+    before = jnp.cumsum(count) - count
+    rank = (before[:, None] + jnp.cumsum(candidate, axis=1, dtype=jnp.int32) - 1).reshape(-1)
+    candidate = candidate.reshape(-1)
+    n = candidate.shape[0]
+    K = max(1, -(-n // ROUND_SHARE))
+    rounds = (before[-1] + count[-1] + K - 1) // K
+    flat_p, flat_q = p.reshape(B * W, 3), q.reshape(B * W, 4)
+
+    def one_pair(i):
+        pose, pair = i // (C * O), i % (C * O)
+        lane, c, o = pose // W, pair // O, pair % O
+        o_kind, o_centre, o_mat, o_size, _ = (x[lane, o] for x in objects)
+        g_pos, g_mat, g_size = gripper_geoms(flat_p[pose], flat_q[pose], dims[lane])
+        axis = g_mat[c, :, 2] * g_size[c, 1]
+        a_loc = _into_frames(o_mat, g_pos[c] - axis - o_centre)
+        d_loc = _into_frames(o_mat, 2.0 * axis)
+        dist = segment_distance(a_loc, d_loc, o_kind, o_size)
+        return pose, dist < g_size[c, 0] - PENETRATION_EPS
+
+    def one_round(j, hit):
+        slot = rank - j * K
+        take = candidate & (slot >= 0) & (slot < K)
+        idx = jnp.full(K, n, jnp.int32).at[jnp.where(take, slot, K)].set(
+            jnp.arange(n, dtype=jnp.int32), mode="drop")
+        pose, pen = jax.vmap(one_pair)(jnp.minimum(idx, n - 1))
+        return hit.at[jnp.where(idx < n, pose, B * W)].max(pen, mode="drop")
+
+    hit = jax.lax.fori_loop(0, rounds, one_round, jnp.zeros(B * W, bool))
+    return hit.reshape(B, W)
 
 
 def penetrates(objects, p, q, dims) -> Bool[Array, ""]:

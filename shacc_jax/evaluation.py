@@ -131,11 +131,12 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
             g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
         gripper = params.gripper()
 
-    def penetrates(i, k, q):
-        s = lanes.scene[i]
-        p = am.sample(jax.tree.map(lambda a: a[i], lanes.path), k)
-        obj = jax.tree.map(lambda a: a[s], objects)
-        return col.penetrates(obj, p, q, gripper[s])
+    def penetrations(idx, k, r_at, valid):
+        """(B, W): whether the gripper penetrates an object at each sample."""
+        p = jnp.moveaxis(lanes.points(idx, k), 0, -1)
+        s = lanes.scene[idx]
+        return col.sample_penetrations(jax.tree.map(lambda x: x[s], objects), p, r_at,
+                                       gripper[s], valid)
 
     def per_block(formula, idx, start, valid, rows):
         r_b, n_b, hit_b = rows
@@ -157,7 +158,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
             turned = jnp.zeros((B, W), bool)
         if collide:
             c_valid = valid & (k >= c_from[idx][:, None]) & (k <= c_to[idx][:, None])
-            pen = jax.vmap(jax.vmap(penetrates, (None, 0, 0)))(idx, k, r_at) & c_valid
+            pen = penetrations(idx, k, r_at, c_valid)
             first = jnp.argmax(pen, axis=1)
             hit_now = jnp.any(pen, axis=1) & alive
             upto = jnp.where(hit_now, first, W)
@@ -264,8 +265,11 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         path, act, out = passes["init" if mode == "baseline" else "opt"]
         track = mode == "shacc"
         if track or layout.collision_checks:
-            # Collision checks get smaller blocks: each pose is a whole MJX collision call.
-            block = max(1, lanes_per_block // 8) if layout.collision_checks else lanes_per_block
+            # With collision checks a block holds (lanes x samples x capsules x objects)
+            # pairs: a quarter of the lanes on an accelerator; on a CPU all of them (fewer,
+            # fuller rounds of the exact search). Measured: benchmarks/RESULTS.md.
+            share = 1 if jax.default_backend() == "cpu" else 4
+            block = max(1, lanes_per_block // share) if layout.collision_checks else lanes_per_block
             r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track, block)
             out = _collided(out, path, hit)
         else:

@@ -305,3 +305,34 @@ def _window_and_penetrations(kind, centre, quat, size, p0, c0, r0):
 
     return jax.vmap(one)(p0, c0, r0)
 
+
+
+@pytest.mark.parametrize("share", [1, 32, 4096])
+def test_gathered_search_decides_as_the_direct_check(monkeypatch, share):
+    """``sample_penetrations`` (lower bound, then the exact search on the pairs it does
+    not clear, gathered into rounds) against ``penetrates`` pose by pose, on random
+    poses among random objects, with one round for all pairs, the default share, and
+    many small rounds."""
+    monkeypatch.setattr(col, "ROUND_SHARE", share)
+    rng = np.random.default_rng(share)
+    B, W, O = 12, 16, 5
+    kind = jnp.asarray(rng.choice([CYLINDER, BOX], (B, O)), jnp.int32)
+    centre = jnp.asarray(rng.uniform([-0.15, -0.15, 0.0], [0.15, 0.15, 0.1], (B, O, 3)),
+                         jnp.float32)
+    quat = jnp.asarray(np.roll(Rotation.random(B * O, random_state=rng).as_quat(), 1, axis=1)
+                       .reshape(B, O, 4), jnp.float32)
+    size = jnp.asarray(rng.uniform(0.01, 0.08, (B, O, 3)), jnp.float32)
+    mask = jnp.asarray(rng.random((B, O)) < 0.8)
+    objects = jax.vmap(col.scene_objects)(kind, centre, quat, size, mask)
+    p = jnp.asarray(rng.uniform(-0.2, 0.2, (B, W, 3)), jnp.float32)
+    q = jnp.asarray(np.roll(Rotation.random(B * W, random_state=rng).as_quat(), 1, axis=1)
+                    .reshape(B, W, 4), jnp.float32)
+    dims = jnp.asarray(np.column_stack([rng.uniform(0.05, 0.12, B), rng.uniform(0.005, 0.02, B),
+                                        rng.uniform(0.04, 0.12, B), rng.uniform(0.005, 0.02, B)]),
+                       jnp.float32)
+    live = jnp.asarray(rng.random((B, W)) < 0.9)
+    got = np.asarray(jax.jit(col.sample_penetrations)(objects, p, q, dims, live))
+    direct = jax.vmap(jax.vmap(col.penetrates, (None, 0, 0, None)), (0, 0, 0, 0))
+    want = np.asarray(jax.jit(direct)(objects, p, q, dims)) & np.asarray(live)
+    assert 0.1 < want.mean() < 0.9
+    np.testing.assert_array_equal(got, want)
