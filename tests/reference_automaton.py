@@ -172,9 +172,9 @@ class Collider:
             self.data.geom_xmat[g0 + k] = m.ravel()
         # mj_geomDistance answers exactly up to distmax (1 m) and distmax beyond it; pairs
         # whose bounding spheres are apart by more than 1 cm cannot decide a penetration.
-        near = [(o, k) for o in range(self.n_obj) for k in range(3)
-                if np.linalg.norm(self.data.geom_xpos[o] - self.data.geom_xpos[g0 + k])
-                < self.model.geom_rbound[o] + self.model.geom_rbound[g0 + k] + 0.01]
+        xpos, rbound = self.data.geom_xpos, self.model.geom_rbound
+        apart = np.linalg.norm(xpos[:g0, None] - xpos[None, g0:g0 + 3], axis=-1)
+        near = np.argwhere(apart < rbound[:g0, None] + rbound[None, g0:g0 + 3] + 0.01)
         return min((self.mujoco.mj_geomDistance(self.model, self.data, o, g0 + k, 1.0, None)
                     for o, k in near), default=1.0)
 

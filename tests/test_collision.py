@@ -336,3 +336,102 @@ def test_gathered_search_decides_as_the_direct_check(monkeypatch, share):
     want = np.asarray(jax.jit(direct)(objects, p, q, dims)) & np.asarray(live)
     assert 0.1 < want.mean() < 0.9
     np.testing.assert_array_equal(got, want)
+
+
+def test_objects_are_the_exported_mjcf_geoms(shipped_results):
+    """The objects the check uses are MuJoCo's geoms of the exported MJCF. Every
+    collidable geom of each scene's MJCF (shipped, extra and random scenes), read back by
+    MuJoCo, has the bake's kind, size, position and orientation; and with the gripper's
+    capsules added to that loaded model (MjSpec), MuJoCo's ``mj_geomDistance`` decides
+    penetrations on random poses near the objects as ``deepest`` does."""
+    import mujoco
+
+    from geometry_precompute import extra_scene_paths, load_scene, random_scene
+    from geometry_precompute.mjcf import scene_to_mjcf
+
+    results = [*shipped_results, *(precompute(load_scene(p)) for p in extra_scene_paths()),
+               *(precompute(random_scene(seed, "gaussian", 8, 10)) for seed in range(3))]
+    baked = bake(results)
+    sc = Geometry.from_bake(baked)
+    gripper = Params.from_bake(baked).gripper()
+    types = {CYLINDER: mujoco.mjtGeom.mjGEOM_CYLINDER, BOX: mujoco.mjtGeom.mjGEOM_BOX}
+    deepest = jax.jit(jax.vmap(col.deepest, (None, 0, 0, None)))
+    rng = np.random.default_rng(7)
+    n = 300
+    decided = []
+    for s, r in enumerate(results):
+        spec = mujoco.MjSpec.from_string(scene_to_mjcf(r, spaces="none"))
+        hand = spec.worldbody.add_body(name="gripper")
+        hand.add_freejoint()
+        length, r_f, opening, r_p = (float(v) for v in gripper[s])
+        for radius, half in ((r_f, length / 2), (r_f, length / 2), (r_p, opening / 2)):
+            hand.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, half, 0])
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        mujoco.mj_kinematics(model, data)
+        ids = [model.geom(f"object:{o.id}").id for o in r.scene.objects]
+        assert len(ids) == int(baked.obj_mask[s].sum())
+        for o, g in enumerate(ids):
+            assert model.geom_type[g] == types[int(baked.obj_kind[s, o])]
+            size = baked.obj_size[s, o] if baked.obj_kind[s, o] == BOX else baked.obj_size[s, o, :2]
+            np.testing.assert_allclose(model.geom_size[g, :len(size)], size, atol=1e-6)
+            np.testing.assert_allclose(data.geom_xpos[g], baked.obj_center[s, o], atol=1e-6)
+            np.testing.assert_allclose(
+                data.geom_xmat[g].reshape(3, 3),
+                Rotation.from_quat(np.roll(baked.obj_quat[s, o], -1)).as_matrix(), atol=1e-6)
+        # Random poses near a random object of the scene, against the loaded model.
+        near = baked.obj_center[s, rng.integers(0, len(ids), n)]
+        P = near + rng.normal(scale=0.06, size=(n, 3))
+        R = Rotation.random(n, random_state=rng)
+        objects = col.scene_objects(sc.obj_kind[s], sc.obj_center[s], sc.obj_quat[s],
+                                    sc.obj_size[s], sc.obj_mask[s])
+        got = np.asarray(deepest(objects, jnp.asarray(P, jnp.float32),
+                                 jnp.asarray(np.roll(R.as_quat(), 1, axis=1), jnp.float32),
+                                 gripper[s]))
+        capsules = range(model.ngeom - 3, model.ngeom)
+        for i in range(n):
+            m, half = R[i].as_matrix(), opening / 2
+            x, y, z = m[:, 0], m[:, 1], m[:, 2]
+            poses = [(P[i] + half * y - length / 2 * z, m), (P[i] - half * y - length / 2 * z, m),
+                     (P[i] - length * z, np.column_stack([x, -z, y]))]
+            for g, (c, mat) in zip(capsules, poses, strict=True):
+                data.geom_xpos[g], data.geom_xmat[g] = c, mat.ravel()
+            want = min(mujoco.mj_geomDistance(model, data, o, g, 1.0, None)
+                       for o in ids for g in capsules)
+            if abs(want + col.PENETRATION_EPS) > 1e-5:  # not on the decision's edge
+                pen = want < -col.PENETRATION_EPS
+                assert (got[i] < -col.PENETRATION_EPS) == pen, (r.scene.name, i, got[i], want)
+                decided.append(pen)
+    assert len(decided) > 0.99 * n * len(results)
+    assert 0.2 < np.mean(decided) < 0.8  # both kinds of pose are well represented
+
+
+def test_collision_rollouts_agree_on_extra_and_random_scenes():
+    """The extra scenes (a tray, a box, among mugs: every rollout) and 100 random scenes
+    (3 to 6 tasks, half uniform, half gaussian: every task in every mode from one start
+    per scene) against the NumPy Automaton with CPU MuJoCo collisions: at least 99.9 %
+    of the rollouts identical in outcome and step."""
+    from geometry_precompute import extra_scene_paths, load_scene, random_scene
+
+    def checked(scene):
+        return precompute(scene, scene.settings().with_overrides({"collision": "mjx"}))
+
+    extra = [checked(load_scene(p)) for p in extra_scene_paths()]
+    rand = [checked(random_scene(seed, ("uniform", "gaussian")[seed % 2], 3, 6))
+            for seed in range(100)]
+    b = bake(extra + rand)
+    ro = run(b).rollouts
+    N = b.n_starts
+    keys = [(s, m, n, t) for s, r in enumerate(extra) for m in range(len(shacc_jax.MODES))
+            for n in range(N) for t in range(len(r.spaces))]
+    keys += [(s, m, (7 * s) % N, t) for s, r in enumerate(rand, start=len(extra))
+             for m in range(len(shacc_jax.MODES)) for t in range(len(r.spaces))]
+    differ = []
+    for s, m, n, t in keys:
+        ref = rollout(b, s, shacc_jax.MODES[m], n, t)
+        got = (OUTCOME_NAMES[ro.outcome[s, m, n, t]], int(ro.step[s, m, n, t]))
+        if got != (ref.outcome, ref.step):
+            differ.append(((s, m, n, t), got, (ref.outcome, ref.step)))
+    assert len(differ) <= 0.001 * len(keys), differ[:5]
+    outcomes = np.array([ro.outcome[k] for k in keys])
+    assert (outcomes == COLLISION).mean() > 0.05 and (outcomes == SUCCESS).mean() > 0.2
