@@ -210,7 +210,8 @@ def _assemble(geometry: Geometry, out: am.Outcome, r, meta_steps) -> Rollouts:
     dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
         out, r, orient, jnp.arange(T))
     code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
-    return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr)
+    return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
+                    r)
 
 
 def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:

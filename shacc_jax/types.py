@@ -128,6 +128,7 @@ class Rollouts(NamedTuple):
     path_length: Float[Array, "S M N T"]
     meta_steps: Int[Array, "S M N T"]
     delta_R: Float[Array, "S M N T"]  # NaN unless success
+    orientation: Float[Array, "S M N T 4"]  # R at the end (w, x, y, z)
 
 
 class SceneMetrics(NamedTuple):

@@ -5,7 +5,9 @@ initial red, optimised blue) beside the top-down matplotlib view, composed to ex
 ``--width`` x ``--height`` pixels. MuJoCo renders through EGL; the command sets
 ``MUJOCO_GL=egl`` when it is unset, which works on CPU machines with Mesa's EGL.
 ``--path START TASK`` draws one rollout of ``--mode`` in both views: the straight
-segment from the start to where it activated (or stopped).
+segment from the start to where it activated (or stopped), and the gripper's three
+capsules (those the collision check uses) at the start pose and at the end pose, in
+the orientation the rollout ended with (turned by the meta skill in ``shacc``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 # MuJoCo picks its GL backend when it is first imported: choose EGL before that.
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -30,7 +33,7 @@ SPACES_FOR_MODE = {"baseline": "init", "shrinking": "both", "shacc": "both"}
 
 
 def render_array(result, width: int, height: int, spaces: str = "both",
-                 path: np.ndarray | None = None) -> np.ndarray:
+                 path: RolloutPath | None = None) -> np.ndarray:
     """(height, width, 3) uint8 image of the scene from the front-left, above."""
     import mujoco
 
@@ -56,8 +59,16 @@ def render_array(result, width: int, height: int, spaces: str = "both",
             mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3),
                                 np.eye(3).ravel(), np.array([0.1, 0.8, 0.1, 1.0], np.float32))
             mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_CAPSULE, 0.006,
-                                 np.asarray(path[0], float), np.asarray(path[1], float))
+                                 np.asarray(path.points[0], float),
+                                 np.asarray(path.points[1], float))
             scn.ngeom += 1
+            for i, pose in enumerate(path.capsules):  # start translucent, end solid
+                rgba = [0.1, 0.8, 0.1, 0.35 if i == 0 else 0.9]
+                for centre, mat, size in zip(*pose, strict=True):
+                    mujoco.mjv_initGeom(scn.geoms[scn.ngeom], mujoco.mjtGeom.mjGEOM_CAPSULE,
+                                        np.array([size[0], size[1], 0.0]), centre,
+                                        mat.ravel(), np.array(rgba, np.float32))
+                    scn.ngeom += 1
         return renderer.render().copy()
 
 
@@ -70,7 +81,12 @@ def top_view_array(result, width: int, height: int, path=None) -> np.ndarray:
     fig, ax = plt.subplots(figsize=(width / dpi, height / dpi), dpi=dpi)
     scene_top_view(result, ax=ax)
     if path is not None:
-        ax.plot([path[0][0], path[1][0]], [path[0][1], path[1][1]], color="green", lw=2)
+        (x0, y0, _), (x1, y1, _) = path.points
+        ax.plot([x0, x1], [y0, y1], color="green", lw=2)
+        for centres, mats, sizes in path.capsules:  # the capsules' axes, from above
+            for c, m, (_, half) in zip(centres, mats, sizes, strict=True):
+                a, b = c - half * m[:, 2], c + half * m[:, 2]
+                ax.plot([a[0], b[0]], [a[1], b[1]], color="green", lw=1.5, alpha=0.8)
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
@@ -83,15 +99,31 @@ def top_view_array(result, width: int, height: int, path=None) -> np.ndarray:
     return (out * 255).astype(np.uint8)
 
 
-def rollout_path(result, mode: str, start: int, task: int) -> np.ndarray:
+class RolloutPath(NamedTuple):
+    points: np.ndarray  # (2, 3): start and end
+    quats: np.ndarray  # (2, 4): the orientation there (w, x, y, z)
+    capsules: list  # per pose: the gripper's centres (3, 3), matrices (3, 3, 3), sizes (3, 2)
+
+
+def rollout_path(result, mode: str, start: int, task: int) -> RolloutPath:
+    """One rollout of ``mode``: where it started and ended, and the gripper's capsules
+    there (``collision.gripper_geoms``, sized by the scene's ``gripper.*`` settings)."""
+    from shacc_jax.collision import gripper_geoms
+
     ev = evaluate_results([result], (mode,))
     n_starts = ev.baked.n_starts
     if not (0 <= start < n_starts and 0 <= task < len(result.spaces)):
         raise InputError("<--path>", "START TASK", f"need 0 <= START < {n_starts} and "
                          f"0 <= TASK < {len(result.spaces)}")
-    p0 = ev.baked.starts[0, start, :3]
-    p1 = ev.evaluation.rollouts.point[0, 0, start, task]
-    return np.stack([p0, p1])
+    b, ro = ev.baked, ev.evaluation.rollouts
+    points = np.stack([b.starts[0, start, :3], ro.point[0, 0, start, task]]).astype(float)
+    quats = np.stack([b.starts[0, start, 3:], ro.orientation[0, 0, start, task]]).astype(float)
+    dims = np.array([b.gripper_finger_length[0], b.gripper_finger_radius[0],
+                     b.gripper_opening[0], b.gripper_palm_radius[0]], np.float32)
+    capsules = [tuple(np.asarray(a, float) for a in gripper_geoms(p, q, dims))
+                for p, q in zip(points.astype(np.float32), quats.astype(np.float32),
+                                strict=True)]
+    return RolloutPath(points, quats, capsules)
 
 
 def render_scene(result, out: Path, width: int = 1280, height: int = 560,

@@ -58,6 +58,9 @@ def compare(ev, table, dr_tol):
         else:
             np.testing.assert_allclose(ro.point[s, m, n, t], ref.point, atol=1e-5)
             assert abs(ro.path_length[s, m, n, t] - ref.path_length) < 1e-5
+            q = np.asarray(ro.orientation[s, m, n, t], float)
+            angle = 2 * np.arccos(min(abs(q @ ref.quat) / np.linalg.norm(q), 1.0))
+            assert angle <= max(dr_tol, 2e-3), (q, ref.quat)  # the same R (q or -q)
     assert not mismatches, mismatches[:10]
     return len(table)
 

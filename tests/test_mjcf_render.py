@@ -62,3 +62,29 @@ def test_render_is_a_nonblank_picture_of_the_right_size(tmp_path, mode, path):
     left, right = img[:, :200, :3], img[:, 200:, :3]
     assert left.std() > 0.05 and right.std() > 0.05  # both views drew something
     assert len(np.unique(left.reshape(-1, 3).round(2), axis=0)) > 50
+
+
+def test_render_draws_the_gripper_at_the_end_pose(shipped_results):
+    """``--path`` in shacc: the gripper's capsules are drawn at the start pose and at the
+    end pose in the orientation the meta skill turned it to (the evaluation's
+    ``orientation``, checked against the NumPy reference in test_automaton)."""
+    from scipy.spatial.transform import Rotation
+
+    from sweeps.pipeline import evaluate_results
+    from sweeps.render import render_array, rollout_path
+
+    r = shipped_results[9]  # three mugs in a cluster: the meta skill turns the gripper
+    ro = evaluate_results([r], ("shacc",)).evaluation.rollouts
+    n, t = np.argwhere(ro.meta_steps[0, 0] > 5)[0]
+    path = rollout_path(r, "shacc", int(n), int(t))
+    np.testing.assert_allclose(path.points[1], ro.point[0, 0, n, t], atol=1e-6)
+    start, end = (Rotation.from_quat(np.roll(q, -1)) for q in path.quats)
+    assert (start.inv() * end).magnitude() > 0.05  # it turned
+    centres, mats, sizes = path.capsules[1]
+    z = end.as_matrix()[:, 2]
+    np.testing.assert_allclose(centres[2], path.points[1] - sizes[0, 1] * 2 * z, atol=1e-5)
+    np.testing.assert_allclose(mats[0], end.as_matrix(), atol=1e-5)
+    drawn = render_array(r, 320, 240, "both", path)
+    bare = render_array(r, 320, 240, "both", path._replace(capsules=[]))
+    changed = np.abs(drawn.astype(int) - bare.astype(int)).sum(axis=-1) > 30
+    assert changed.sum() > 100  # the capsules cover a visible part of the picture

@@ -338,3 +338,25 @@ def _session_processes(sid: int, holding: str) -> list[int]:
         except OSError:
             pass
     return found
+
+
+def test_sweep_over_collision_and_gripper_sizes(tmp_path):
+    """An axis over ``collision`` and one over the gripper's opening: all four points
+    share one geometry (rollout settings only), so one group and one evaluation per
+    chunk; without checks nothing collides, with them both grips collide and the
+    opening changes how often."""
+    from sweeps.plan import point_groups
+
+    text = CONFIG.replace("v_max = [0.15, 0.3]\nstart_grid = [[2, 2]]",
+                          'collision = ["off", "mjx"]\ngripper.opening = [0.04, 0.14]\n'
+                          "start_grid = [[4, 3]]")
+    cfg = load_config(write(tmp_path, text))
+    assert point_groups(cfg) == [(0, 1, 2, 3)]
+    run_sweep(cfg, tmp_path / "out", tmp_path / "cache", workers=1, progress=False)
+    rows = pd.read_parquet(tmp_path / "out" / "rollouts")
+    hits = rows.assign(hit=rows["outcome"] == "collision").groupby("point")["hit"].sum()
+    by = {(p["collision"], p["gripper.opening"]): int(hits[i])
+          for i, p in enumerate(cfg.points)}
+    assert by[("off", 0.04)] == 0 and by[("off", 0.14)] == 0
+    assert by[("mjx", 0.04)] > 0 and by[("mjx", 0.14)] > 0
+    assert by[("mjx", 0.04)] != by[("mjx", 0.14)]
