@@ -165,6 +165,10 @@ def lower_bound(a, d, kind, size):
     return jnp.where(kind == BOX, box, jnp.sqrt(gap_r * gap_r + gap_z * gap_z))
 
 
+# Objects a rollout is checked against when it can touch no more than these (most can
+# touch one to three); rollouts that can touch more are checked against all.
+OBJECT_SLOTS = 4
+
 # Share of the (sample, capsule, object) pairs a round of the exact search takes (on
 # random 10-task scenes 1.6 % of the pairs pass the lower bound).
 ROUND_SHARE = 32
@@ -342,8 +346,8 @@ def last_sample(lo: Array, hi: Array, path: am.Path, max_steps: Array) -> Array:
 def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
                 gripper: Float[Array, "4"], r0: Float[Array, "4"], path: am.Path,
                 turn_from: Array, max_steps: Array) -> tuple[Array, Array]:
-    """(first, last) sample of one path at which the gripper can touch an object;
-    empty when first > last. One scene's objects, one path.
+    """Per object (O,): the first and last sample of one path at which the gripper can
+    touch it; empty when first > last. One scene's objects, one path.
 
     Before ``turn_from`` (the first sample at which the meta skill may rotate; inf
     without one) the gripper keeps the start orientation ``r0`` and moves along the
@@ -367,9 +371,10 @@ def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
                                          rho)
     lo, hi = jnp.where(obj_mask[None, :], lo, inf), jnp.where(obj_mask[None, :], hi, -inf)
     zero = jnp.zeros((), dtype)
-    first = jnp.min(am.first_sample(lo, hi, zero, path, max_steps))
-    last = jnp.minimum(jnp.max(last_sample(lo, hi, path, max_steps)), turn_from - 1.0)
+    first = jnp.min(am.first_sample(lo, hi, zero, path, max_steps), axis=0)
+    last = jnp.minimum(jnp.max(last_sample(lo, hi, path, max_steps), axis=0), turn_from - 1.0)
     first = jnp.where(first <= last, first, inf)
+    last = jnp.where(jnp.isfinite(first), last, -inf)
     # From turn_from on: bounding spheres.
     r_obj = jnp.where(obj_kind == BOX, jnp.linalg.norm(obj_size, axis=-1),
                       jnp.hypot(obj_size[:, 0], obj_size[:, 1]))
@@ -377,10 +382,7 @@ def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
     s_lo, s_hi = _line_sphere(path.u, obj_center - path.p0, reach)
     s_lo, s_hi = jnp.where(obj_mask, s_lo, inf), jnp.where(obj_mask, s_hi, -inf)
     kmin = jnp.where(jnp.isfinite(turn_from), turn_from, inf)
-    s_first = jnp.min(am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps + 1.0),
-                                      path, max_steps))
+    s_first = am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps + 1.0), path, max_steps)
     s_first = jnp.where(jnp.isfinite(kmin), s_first, inf)
-    s_last = jnp.where(jnp.isfinite(s_first),
-                       jnp.max(last_sample(s_lo, s_hi, path, max_steps)), -inf)
-    return jnp.minimum(first, s_first), jnp.maximum(jnp.where(jnp.isfinite(first), last, -inf),
-                                                    s_last)
+    s_last = jnp.where(jnp.isfinite(s_first), last_sample(s_lo, s_hi, path, max_steps), -inf)
+    return jnp.minimum(first, s_first), jnp.maximum(last, s_last)

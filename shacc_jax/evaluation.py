@@ -61,8 +61,9 @@ def activation_pass(geometry: Geometry, params: Params, which: str):
 def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step: Array,
              prep: tracking.Prepared | None, collide: bool):
     """Per lane: the meta window (tracking) and the collision window, each (from, to)
-    samples, empty when from > to; and the joined window's start and length. ``prep``:
-    the tracking's prepared spaces, None without tracking."""
+    samples, empty when from > to; the joined window's start and length; and which
+    objects the gripper can touch in the collision window (L, O). ``prep``: the
+    tracking's prepared spaces, None without tracking."""
     dtype = geometry.starts.dtype
     inf = jnp.asarray(jnp.inf, dtype)
 
@@ -81,14 +82,17 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
             first, last = col.path_window(g.obj_kind, g.obj_center, g.obj_quat, g.obj_size,
                                           g.obj_mask, p.gripper(), g.starts[n, 3:], path,
                                           turn_from, x["max_steps"])
-            c_from = jnp.where(p.collision, first, inf)
             end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
-            c_to = jnp.minimum(last, end)
+            touch = p.collision & (first <= jnp.minimum(last, end))
+            c_from = jnp.min(jnp.where(touch, first, inf))
+            c_to = jnp.minimum(jnp.max(jnp.where(touch, last, -inf)), end)
         else:
             c_from, c_to = inf, -inf
-        return m_from, m_to, c_from, c_to
+            touch = jnp.zeros(g.obj_mask.shape, bool)
+        return m_from, m_to, c_from, c_to, touch
 
-    m_from, m_to, c_from, c_to = jax.vmap(one)(lanes.scene, lanes.start, lanes.path, act_step)
+    m_from, m_to, c_from, c_to, touch = jax.vmap(one)(lanes.scene, lanes.start, lanes.path,
+                                                      act_step)
     # Padded target tasks get an empty window: their outcome is INVALID anyway, and in a
     # batch of 5- to 10-task scenes padded to 10 they are up to half of the lanes.
     real = geometry.task_mask[lanes.scene, lanes.task]
@@ -97,7 +101,7 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
     w_to = jnp.maximum(jnp.where(m_ok, m_to, -inf), jnp.where(c_ok, c_to, -inf))
     length = jnp.where(real & (m_ok | c_ok), w_to - w_from + 1.0, 0.0)
     w_from = jnp.where(length > 0, w_from, 0.0)
-    return (m_from, m_to), (c_from, c_to), w_from, length
+    return (m_from, m_to), (c_from, c_to), w_from, length, touch
 
 
 def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activation,
@@ -107,10 +111,12 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
     (S, N, T, 4), the meta steps (S, N, T) and the first colliding sample (S, N, T; inf
     for none).
 
-    Each lane's window joins its meta window with the samples from the first
-    bounding-sphere contact to the activation sample. Per block of lanes x W samples:
-    the meta targets in one parallel pass, a W-step scan of the rotation rule that
-    also emits R at each sample, then the collision checks of all B x W poses at once.
+    Each lane's window joins its meta window with the samples at which the gripper can
+    touch an object (``collision.path_window``), up to the activation sample. Per block
+    of lanes x W samples: the meta targets in one parallel pass, a W-step scan of the
+    rotation rule that also emits R at each sample, then the collision checks of all
+    B x W poses at once against the lane's touchable objects, J at a time (a lane that
+    can touch more than J runs once per group of J; the run that collides first counts).
     A collision at sample k ends the lane: R stays as it was at k and the rotations
     from k on are not counted (the step rule checks collisions before it rotates).
     With ``layout.meta_formula`` "both", the lanes of yaw-only scenes and the others
@@ -124,21 +130,38 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
     offsets = jnp.arange(W, dtype=dtype)
     lanes = tracking.Lanes.of(path)
     prep = tracking.prepare(geometry) if track else None
-    (m_from, m_to), (c_from, c_to), w_from, length = _windows(
+    (m_from, m_to), (c_from, c_to), w_from, length, touch = _windows(
         geometry, params, lanes, act.step.reshape(L), prep, collide)
+    O = geometry.obj_mask.shape[1]
+    J = min(O, col.OBJECT_SLOTS)
     if collide:
         objects = jax.vmap(lambda g: col.scene_objects(
             g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
         gripper = params.gripper()
+        # Each lane's touchable objects first (in object order), J per group: most lanes
+        # can touch at most J and need one group; a lane that can touch more is run once
+        # per group of J, and the run that collides first decides.
+        G = -(-O // J)
+        count = jnp.sum(touch, axis=1)
+        order = jnp.argsort(~touch, axis=1, stable=True)
+        order = jnp.concatenate([order, jnp.zeros((L, G * J - O), order.dtype)], axis=1)
+    else:
+        G = 1
 
-    def penetrations(idx, k, r_at, valid):
-        """(B, W): whether the gripper penetrates an object at each sample."""
+    def penetrations(idx, k, r_at, valid, group):
+        """(B, W): whether the gripper penetrates one of the lanes' objects of ``group``
+        at each sample."""
         p = jnp.moveaxis(lanes.points(idx, k), 0, -1)
         s = lanes.scene[idx]
-        return col.sample_penetrations(jax.tree.map(lambda x: x[s], objects), p, r_at,
-                                       gripper[s], valid)
+        kind, centre, mat, size, mask = objects
+        take = jax.lax.dynamic_slice_in_dim(order[idx], group * J, J, axis=1)
+        rank = group * J + jnp.arange(J)
+        picked = [x[s[:, None], take] for x in (kind, centre, mat, size)]
+        # Objects that cannot be touched in the lane's window are left out exactly.
+        reachable = mask[s[:, None], take] & (rank[None, :] < count[idx][:, None])
+        return col.sample_penetrations((*picked, reachable), p, r_at, gripper[s], valid)
 
-    def per_block(formula, idx, start, valid, rows):
+    def per_block(formula, group, idx, start, valid, rows):
         r_b, n_b, hit_b = rows
         B = idx.shape[0]
         k = w_from[idx][:, None] + start + offsets[None, :]
@@ -158,7 +181,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
             turned = jnp.zeros((B, W), bool)
         if collide:
             c_valid = valid & (k >= c_from[idx][:, None]) & (k <= c_to[idx][:, None])
-            pen = penetrations(idx, k, r_at, c_valid)
+            pen = penetrations(idx, k, r_at, c_valid, group)
             first = jnp.argmax(pen, axis=1)
             hit_now = jnp.any(pen, axis=1) & alive
             upto = jnp.where(hit_now, first, W)
@@ -175,17 +198,31 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
              jnp.full(L, inf))
 
     def one_pass(length, formula):
-        return lane_scheduler.run(length, lanes_per_block, W, state,
-                                  partial(per_block, formula))
+        if G == 1:
+            return lane_scheduler.run(length, lanes_per_block, W, state,
+                                      partial(per_block, formula, 0))
+
+        # One compiled pass, run per object group over the lanes that have objects in it.
+        def group_pass(g):
+            busy = jnp.where((g == 0) | (count > g * J), length, 0.0)
+            return lane_scheduler.run(busy, lanes_per_block, W, state,
+                                      partial(per_block, formula, g))
+
+        r, n, hit = jax.lax.map(group_pass, jnp.arange(G))
+        # The group that collides first ended the lane; without a collision all agree
+        # with group 0 (argmin of all-inf is 0).
+        pick = jnp.argmin(hit, axis=0)
+        return (r[pick, jnp.arange(L)], n[pick, jnp.arange(L)], hit[pick, jnp.arange(L)])
 
     if not track or layout.meta_formula != "both":
-        r, n, hit = one_pass(length, layout.meta_formula)
+        result = one_pass(length, layout.meta_formula)
     else:
         yaw_lane = geometry.yaw_meta[lanes.scene]
         yaw_part = one_pass(jnp.where(yaw_lane, length, 0.0), "yaw")
         general_part = one_pass(jnp.where(yaw_lane, 0.0, length), "general")
-        r, n, hit = (jnp.where(yaw_lane.reshape((L,) + (1,) * (a.ndim - 1)), a, b)
-                     for a, b in zip(yaw_part, general_part, strict=True))
+        result = tuple(jnp.where(yaw_lane.reshape((L,) + (1,) * (a.ndim - 1)), a, b)
+                       for a, b in zip(yaw_part, general_part, strict=True))
+    r, n, hit = result
     return r.reshape(S, N, T, 4), n.reshape(S, N, T), hit.reshape(S, N, T)
 
 
