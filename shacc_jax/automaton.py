@@ -83,6 +83,17 @@ def first_sample(lo: Array, hi: Array, kmin: Array, path: Path, max_steps: Array
     return jnp.where(cand <= max_steps, cand, inf)
 
 
+def last_sample(lo: Array, hi: Array, path: Path, max_steps: Array) -> Array:
+    """Last sample index <= max_steps whose t = min(k s, D) lies in [lo, hi]; -inf if
+    none (the counterpart of :func:`first_sample`)."""
+    inf = jnp.asarray(jnp.inf, path.length.dtype)
+    steps = max_steps.astype(path.length.dtype)
+    rests = (lo <= path.length) & (path.length <= hi) & (path.landing <= steps)
+    k = jnp.minimum(jnp.minimum(jnp.floor(hi / path.step_length), path.landing - 1.0), steps)
+    on_segment = (k >= 0) & (k * path.step_length >= lo)
+    return jnp.where(rests, steps, jnp.where(on_segment, k, -inf))
+
+
 class Activation(NamedTuple):
     step: Float[Array, ""]  # inf when no activation within max_steps
     active: Bool[Array, " T"]

@@ -26,6 +26,8 @@ orientations would otherwise collide before moving (docs/DECISIONS.md).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
@@ -36,6 +38,9 @@ from . import automaton as am
 from . import quaternion as quat
 
 PENETRATION_EPS = 1e-4  # m: a penetration deeper than this is a collision
+# Slack of the path cull (m): far above float32 rounding of metre-scale coordinates.
+CULL_MARGIN = 1e-3
+_TINY = 1e-12
 
 
 def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
@@ -233,11 +238,6 @@ def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
     return deepest(objects, p, q, dims) < -PENETRATION_EPS
 
 
-# Slack of the path cull (m): far above float32 rounding of metre-scale coordinates.
-CULL_MARGIN = 1e-3
-_TINY = 1e-12
-
-
 def _linear_interval(a, b, lo, hi):
     """The t with lo <= a t + b <= hi, as (from, to); empty when from > to."""
     inf = jnp.asarray(jnp.inf, b.dtype)
@@ -316,10 +316,19 @@ def _line_rounded_parallelogram(u, c0, e1, e2, rho):
             jnp.maximum(hi, jnp.where(face, f_hi, -inf)))
 
 
-def bounding_capsules(obj_kind, obj_center, obj_quat, obj_size):
-    """Each object's bounding capsule: its axis segment's start (O, 3) and extent
-    (O, 3), and its radius (O,). A cylinder's is its own axis with its radius; a box's
-    runs along its longest half extent."""
+class Bounds(NamedTuple):
+    """One scene's objects as the path cull sees them (O,): each bounding capsule's axis
+    (start and extent) and radius, and each bounding sphere (about the centre)."""
+
+    start: Array
+    extent: Array
+    radius: Array
+    sphere: Array
+
+
+def object_bounds(obj_kind, obj_center, obj_quat, obj_size) -> Bounds:
+    """A cylinder's bounding capsule is its own axis with its radius; a box's runs along
+    its longest half extent. Computed once per scene, used by every path."""
     mats = jax.vmap(quat.to_matrix)(obj_quat)
     longest = jnp.argmax(obj_size, axis=-1)
     box_axis = jnp.take_along_axis(mats, longest[:, None, None], axis=2)[:, :, 0]
@@ -329,25 +338,16 @@ def bounding_capsules(obj_kind, obj_center, obj_quat, obj_size):
     half = jnp.where(is_box[:, None], box_axis * box_half[:, None],
                      mats[:, :, 2] * obj_size[:, 1:2])
     radius = jnp.where(is_box, box_radius, obj_size[:, 0])
-    return obj_center - half, 2.0 * half, radius
+    sphere = jnp.where(is_box, jnp.linalg.norm(obj_size, axis=-1),
+                       jnp.hypot(obj_size[:, 0], obj_size[:, 1]))
+    return Bounds(obj_center - half, 2.0 * half, radius, sphere)
 
 
-def last_sample(lo: Array, hi: Array, path: am.Path, max_steps: Array) -> Array:
-    """Last sample index <= max_steps whose t = min(k s, D) lies in [lo, hi]; -inf if
-    none (the counterpart of ``automaton.first_sample``)."""
-    inf = jnp.asarray(jnp.inf, path.length.dtype)
-    steps = max_steps.astype(path.length.dtype)
-    rests = (lo <= path.length) & (path.length <= hi) & (path.landing <= steps)
-    k = jnp.minimum(jnp.minimum(jnp.floor(hi / path.step_length), path.landing - 1.0), steps)
-    on_segment = (k >= 0) & (k * path.step_length >= lo)
-    return jnp.where(rests, steps, jnp.where(on_segment, k, -inf))
-
-
-def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
-                gripper: Float[Array, "4"], r0: Float[Array, "4"], path: am.Path,
-                turn_from: Array, max_steps: Array) -> tuple[Array, Array]:
+def path_window(bounds: Bounds, obj_center, obj_mask, gripper: Float[Array, "4"],
+                r0: Float[Array, "4"], path: am.Path, turn_from: Array,
+                max_steps: Array) -> tuple[Array, Array]:
     """Per object (O,): the first and last sample of one path at which the gripper can
-    touch it; empty when first > last. One scene's objects, one path.
+    touch it; empty when first > last. One scene's objects (``object_bounds``), one path.
 
     Before ``turn_from`` (the first sample at which the meta skill may rotate; inf
     without one) the gripper keeps the start orientation ``r0`` and moves along the
@@ -360,7 +360,7 @@ def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
     can collide is left out."""
     dtype = path.length.dtype
     inf = jnp.asarray(jnp.inf, dtype)
-    start, extent, radius = bounding_capsules(obj_kind, obj_center, obj_quat, obj_size)
+    start, extent, radius, sphere = bounds
     g_pos, g_mat, g_size = gripper_geoms(path.p0, r0, gripper)
     axis = g_mat[:, :, 2] * g_size[:, 1:2]
     # Pairs (capsules, objects): t u within rho of the parallelogram of axis offsets.
@@ -372,17 +372,17 @@ def path_window(obj_kind, obj_center, obj_quat, obj_size, obj_mask,
     lo, hi = jnp.where(obj_mask[None, :], lo, inf), jnp.where(obj_mask[None, :], hi, -inf)
     zero = jnp.zeros((), dtype)
     first = jnp.min(am.first_sample(lo, hi, zero, path, max_steps), axis=0)
-    last = jnp.minimum(jnp.max(last_sample(lo, hi, path, max_steps), axis=0), turn_from - 1.0)
+    last = jnp.minimum(jnp.max(am.last_sample(lo, hi, path, max_steps), axis=0),
+                       turn_from - 1.0)
     first = jnp.where(first <= last, first, inf)
     last = jnp.where(jnp.isfinite(first), last, -inf)
     # From turn_from on: bounding spheres.
-    r_obj = jnp.where(obj_kind == BOX, jnp.linalg.norm(obj_size, axis=-1),
-                      jnp.hypot(obj_size[:, 0], obj_size[:, 1]))
-    reach = gripper_reach(gripper) + r_obj + CULL_MARGIN
+    reach = gripper_reach(gripper) + sphere + CULL_MARGIN
     s_lo, s_hi = _line_sphere(path.u, obj_center - path.p0, reach)
     s_lo, s_hi = jnp.where(obj_mask, s_lo, inf), jnp.where(obj_mask, s_hi, -inf)
     kmin = jnp.where(jnp.isfinite(turn_from), turn_from, inf)
     s_first = am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps + 1.0), path, max_steps)
     s_first = jnp.where(jnp.isfinite(kmin), s_first, inf)
-    s_last = jnp.where(jnp.isfinite(s_first), last_sample(s_lo, s_hi, path, max_steps), -inf)
+    s_last = jnp.where(jnp.isfinite(s_first), am.last_sample(s_lo, s_hi, path, max_steps),
+                       -inf)
     return jnp.minimum(first, s_first), jnp.maximum(last, s_last)

@@ -66,6 +66,9 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
     tracking's prepared spaces, None without tracking."""
     dtype = geometry.starts.dtype
     inf = jnp.asarray(jnp.inf, dtype)
+    if collide:
+        bounds = jax.vmap(col.object_bounds)(geometry.obj_kind, geometry.obj_center,
+                                             geometry.obj_quat, geometry.obj_size)
 
     def one(s, n, path, k_act):
         g = jax.tree.map(lambda a: a[s], geometry)
@@ -79,7 +82,7 @@ def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step
             m_from, m_to = inf, -inf
         if collide:
             turn_from = jnp.where(m_from <= m_to, m_from, inf)
-            first, last = col.path_window(g.obj_kind, g.obj_center, g.obj_quat, g.obj_size,
+            first, last = col.path_window(jax.tree.map(lambda a: a[s], bounds), g.obj_center,
                                           g.obj_mask, p.gripper(), g.starts[n, 3:], path,
                                           turn_from, x["max_steps"])
             end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))

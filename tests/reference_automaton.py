@@ -131,32 +131,39 @@ def angle_between(r1: Rotation, r2: Rotation) -> float:
 
 class Collider:
     """CPU MuJoCo (``mj_geomDistance``) on a model of one scene's real objects and the
-    three gripper capsules, posed directly (no kinematics)."""
+    three gripper capsules, posed directly (no kinematics). The objects come from the
+    baked arrays, or with ``mjcf`` from the scene's exported MJCF (its geoms named
+    ``object:*``); the capsules are added to either model with MjSpec."""
 
-    def __init__(self, baked, scene: int):
+    def __init__(self, baked, scene: int, mjcf: str | None = None):
         import mujoco
 
         s = scene
         self.length = float(baked.gripper_finger_length[s])
         self.opening = float(baked.gripper_opening[s])
         r_f, r_p = float(baked.gripper_finger_radius[s]), float(baked.gripper_palm_radius[s])
-        geoms = []
-        for o in np.flatnonzero(baked.obj_mask[s]):
-            kind = KINDS[baked.obj_kind[s, o]]
-            size = baked.obj_size[s, o] if kind == "box" else baked.obj_size[s, o][:2]
-            fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
-            pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'
-            geoms.append(f'<geom type="{kind}" size="{fmt(size)}" {pose}/>')
-        xml = (f'<mujoco><worldbody>{"".join(geoms)}<body name="g"><freejoint/>'
-               f'<geom type="capsule" size="{r_f} {self.length / 2}"/>'
-               f'<geom type="capsule" size="{r_f} {self.length / 2}"/>'
-               f'<geom type="capsule" size="{r_p} {self.opening / 2}"/>'
-               f'</body></worldbody></mujoco>')
+        if mjcf is None:
+            geoms = []
+            for o in np.flatnonzero(baked.obj_mask[s]):
+                kind = KINDS[baked.obj_kind[s, o]]
+                size = baked.obj_size[s, o] if kind == "box" else baked.obj_size[s, o][:2]
+                fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
+                pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'
+                geoms.append(f'<geom name="object:{o}" type="{kind}" size="{fmt(size)}" {pose}/>')
+            mjcf = f'<mujoco><worldbody>{"".join(geoms)}</worldbody></mujoco>'
+        spec = mujoco.MjSpec.from_string(mjcf)
+        hand = spec.worldbody.add_body(name="gripper")
+        hand.add_freejoint()
+        for radius, half in ((r_f, self.length / 2), (r_f, self.length / 2),
+                             (r_p, self.opening / 2)):
+            hand.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, half, 0])
         self.mujoco = mujoco
-        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         mujoco.mj_kinematics(self.model, self.data)  # places the object geoms
-        self.n_obj = len(geoms)
+        self.objects = np.array([g for g in range(self.model.ngeom)
+                                 if self.model.geom(g).name.startswith("object:")])
+        self.capsules = np.arange(self.model.ngeom - 3, self.model.ngeom)
 
     def deepest(self, p, r: Rotation) -> float:
         R = r.as_matrix()
@@ -166,17 +173,17 @@ class Collider:
         centres = [p + half * y - self.length / 2 * z, p - half * y - self.length / 2 * z,
                    p - self.length * z]
         palm = np.column_stack([x, -z, y])
-        g0 = self.n_obj
-        for k, (c, m) in enumerate(zip(centres, [R, R, palm], strict=True)):
-            self.data.geom_xpos[g0 + k] = c
-            self.data.geom_xmat[g0 + k] = m.ravel()
+        for g, c, m in zip(self.capsules, centres, [R, R, palm], strict=True):
+            self.data.geom_xpos[g] = c
+            self.data.geom_xmat[g] = m.ravel()
         # mj_geomDistance answers exactly up to distmax (1 m) and distmax beyond it; pairs
         # whose bounding spheres are apart by more than 1 cm cannot decide a penetration.
         xpos, rbound = self.data.geom_xpos, self.model.geom_rbound
-        apart = np.linalg.norm(xpos[:g0, None] - xpos[None, g0:g0 + 3], axis=-1)
-        near = np.argwhere(apart < rbound[:g0, None] + rbound[None, g0:g0 + 3] + 0.01)
-        return min((self.mujoco.mj_geomDistance(self.model, self.data, o, g0 + k, 1.0, None)
-                    for o, k in near), default=1.0)
+        obj, cap = self.objects, self.capsules
+        apart = np.linalg.norm(xpos[obj, None] - xpos[None, cap], axis=-1)
+        near = np.argwhere(apart < rbound[obj, None] + rbound[None, cap] + 0.01)
+        return min((self.mujoco.mj_geomDistance(self.model, self.data, obj[o], cap[k], 1.0,
+                                                None) for o, k in near), default=1.0)
 
     def penetrates(self, p, r: Rotation) -> bool:
         return self.deepest(p, r) < -PENETRATION

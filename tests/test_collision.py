@@ -49,10 +49,10 @@ def test_gripper_capsules_match_the_reference_layout():
         centres, mats, sizes = col.gripper_geoms(jnp.asarray(p, jnp.float32), q,
                                                  Params.from_bake(baked).gripper()[0])
         ref.deepest(p, r)  # poses the reference capsules
-        np.testing.assert_allclose(centres, ref.data.geom_xpos[ref.n_obj:], atol=1e-6)
+        np.testing.assert_allclose(centres, ref.data.geom_xpos[ref.capsules], atol=1e-6)
         np.testing.assert_allclose(np.abs(mats.reshape(3, 9)),  # the palm's axis sign is free
-                                   np.abs(ref.data.geom_xmat[ref.n_obj:]), atol=1e-6)
-        np.testing.assert_allclose(sizes, ref.model.geom_size[ref.n_obj:, :2], atol=1e-7)
+                                   np.abs(ref.data.geom_xmat[ref.capsules]), atol=1e-6)
+        np.testing.assert_allclose(sizes, ref.model.geom_size[ref.capsules, :2], atol=1e-7)
 
 
 def test_penetrations_agree_with_cpu_mujoco():
@@ -297,7 +297,8 @@ def _window_and_penetrations(kind, centre, quat, size, p0, c0, r0):
         s = jnp.asarray(0.005, jnp.float32)
         path = am.Path(p0, c0, diff / length, length,
                        jnp.minimum(jnp.ceil(length / s), steps + 1), s)
-        first, last = col.path_window(kind, centre, quat, size, mask, gripper, r0, path,
+        first, last = col.path_window(col.object_bounds(kind, centre, quat, size), centre,
+                                      mask, gripper, r0, path,
                                       jnp.asarray(jnp.inf, jnp.float32), steps)
 
         def per_object(k):  # (O,): whether the gripper penetrates each object at sample k
@@ -346,8 +347,9 @@ def test_objects_are_the_exported_mjcf_geoms(shipped_results):
     """The objects the check uses are MuJoCo's geoms of the exported MJCF. Every
     collidable geom of each scene's MJCF (shipped, extra and random scenes), read back by
     MuJoCo, has the bake's kind, size, position and orientation; and with the gripper's
-    capsules added to that loaded model (MjSpec), MuJoCo's ``mj_geomDistance`` decides
-    penetrations on random poses near the objects as ``deepest`` does."""
+    capsules added to that loaded model (the reference ``Collider`` from the MJCF),
+    MuJoCo's ``mj_geomDistance`` decides penetrations on random poses near the objects
+    as ``deepest`` does."""
     import mujoco
 
     from geometry_precompute import extra_scene_paths, load_scene, random_scene
@@ -364,17 +366,10 @@ def test_objects_are_the_exported_mjcf_geoms(shipped_results):
     n = 300
     decided = []
     for s, r in enumerate(results):
-        spec = mujoco.MjSpec.from_string(scene_to_mjcf(r, spaces="none"))
-        hand = spec.worldbody.add_body(name="gripper")
-        hand.add_freejoint()
-        length, r_f, opening, r_p = (float(v) for v in gripper[s])
-        for radius, half in ((r_f, length / 2), (r_f, length / 2), (r_p, opening / 2)):
-            hand.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, half, 0])
-        model = spec.compile()
-        data = mujoco.MjData(model)
-        mujoco.mj_kinematics(model, data)
+        ref = Collider(baked, s, mjcf=scene_to_mjcf(r, spaces="none"))
+        model, data = ref.model, ref.data
         ids = [model.geom(f"object:{o.id}").id for o in r.scene.objects]
-        assert len(ids) == int(baked.obj_mask[s].sum())
+        assert ids == list(ref.objects) and len(ids) == int(baked.obj_mask[s].sum())
         for o, g in enumerate(ids):
             assert model.geom_type[g] == types[int(baked.obj_kind[s, o])]
             size = baked.obj_size[s, o] if baked.obj_kind[s, o] == BOX else baked.obj_size[s, o, :2]
@@ -392,16 +387,8 @@ def test_objects_are_the_exported_mjcf_geoms(shipped_results):
         got = np.asarray(deepest(objects, jnp.asarray(P, jnp.float32),
                                  jnp.asarray(np.roll(R.as_quat(), 1, axis=1), jnp.float32),
                                  gripper[s]))
-        capsules = range(model.ngeom - 3, model.ngeom)
         for i in range(n):
-            m, half = R[i].as_matrix(), opening / 2
-            x, y, z = m[:, 0], m[:, 1], m[:, 2]
-            poses = [(P[i] + half * y - length / 2 * z, m), (P[i] - half * y - length / 2 * z, m),
-                     (P[i] - length * z, np.column_stack([x, -z, y]))]
-            for g, (c, mat) in zip(capsules, poses, strict=True):
-                data.geom_xpos[g], data.geom_xmat[g] = c, mat.ravel()
-            want = min(mujoco.mj_geomDistance(model, data, o, g, 1.0, None)
-                       for o in ids for g in capsules)
+            want = ref.deepest(P[i], R[i])
             if abs(want + col.PENETRATION_EPS) > 1e-5:  # not on the decision's edge
                 pen = want < -col.PENETRATION_EPS
                 assert (got[i] < -col.PENETRATION_EPS) == pen, (r.scene.name, i, got[i], want)
