@@ -29,10 +29,14 @@ from geometry_precompute import BakedScenes, InputError
 from geometry_precompute.bake import batch_layout
 from shacc_jax.types import Evaluation, Rollouts
 
-# Device memory one rollout needs during evaluation, measured from the 10 000-scene run
-# on the H200 (rollout outputs, the activation pass and the tracking blocks), with a
-# safety factor.
-BYTES_PER_ROLLOUT = 600
+# Memory one rollout needs during evaluation (rollout outputs, the activation pass, the
+# tracking blocks, and with collision checks each rollout's per-object windows and the
+# checks' blocks), with a safety factor of about 1.2 over the largest measured: peak
+# device memory on an H100 (10 000 and 1 000 random 10-task scenes) 251-393 bytes
+# without checks and 1 934-2 509 with; XLA's memory analysis of the CPU program (100
+# and 1 000 scenes) 1 089 and 5 420 (benchmarks/RESULTS.md, memory per rollout).
+BYTES_PER_ROLLOUT = {("accelerator", False): 600, ("accelerator", True): 3000,
+                     ("cpu", False): 1300, ("cpu", True): 6500}
 ENV = "SHACC_MEMORY_BUDGET"
 
 
@@ -62,8 +66,16 @@ def budget() -> int:
     return int(0.5 * free)
 
 
-def bytes_needed(n_scenes: int, n_starts: int, n_tasks: int, n_modes: int) -> int:
-    return BYTES_PER_ROLLOUT * n_scenes * n_starts * n_tasks * n_modes
+def bytes_per_rollout(collision: bool, platform: str | None = None) -> int:
+    """:data:`BYTES_PER_ROLLOUT` of the program that runs (``platform``: "cpu" or
+    another JAX backend; default the one in use), with or without collision checks."""
+    platform = platform or jax.default_backend()
+    return BYTES_PER_ROLLOUT[("cpu" if platform == "cpu" else "accelerator", bool(collision))]
+
+
+def bytes_needed(n_scenes: int, n_starts: int, n_tasks: int, n_modes: int,
+                 collision: bool = False) -> int:
+    return bytes_per_rollout(collision) * n_scenes * n_starts * n_tasks * n_modes
 
 
 def _size(n: float) -> str:
@@ -77,7 +89,7 @@ def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
     """Scenes the optimized mode's search may take in one call: each holds population x
     search starts x tasks activation rollouts at once."""
     limit = budget() if limit is None else limit
-    per_scene = BYTES_PER_ROLLOUT * int(np.max(baked.optimize_population)) * \
+    per_scene = bytes_per_rollout(False) * int(np.max(baked.optimize_population)) * \
         baked.opt_starts.shape[1] * baked.n_tasks
     if per_scene > limit:
         raise InputError("<memory>", "optimize_population x optimize_starts", "the search "
@@ -111,7 +123,8 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
     S, N, T, M = baked.n_scenes, baked.n_starts, baked.n_tasks, len(modes)
     P = 1 if params is None else len(params)
     lead = 0 if params is None else 1  # a points axis before the scenes axis
-    per_start = bytes_needed(S, 1, T, M) * P
+    collision = bool(np.any(baked.collision if params is None else stacked.collision))
+    per_start = bytes_needed(S, 1, T, M, collision) * P
     if per_start * N <= limit:
         return jax.tree.map(np.asarray, evaluate(baked))
     n_per = limit // per_start

@@ -102,7 +102,9 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
         "rollouts": rollouts / RATES[platform],
         "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
     }
-    per_chunk = memory.BYTES_PER_ROLLOUT * int(max(np.prod(g) for g in grids)) * max_tasks * \
+    collision = any(first.settings(DEFAULTS, p)["collision"] != "off" for p in cfg.points)
+    per_chunk = memory.bytes_per_rollout(collision, platform) * \
+        int(max(np.prod(g) for g in grids)) * max_tasks * \
         len(cfg.modes) * bucket(chunk) * max(len(g) for g in point_groups(cfg))
     return {"points": len(cfg.points), "scenes": n, "scene_evaluations": len(cfg.points) * n,
             "rollouts": int(rollouts), "chunks": n_chunks, "chunk_scenes": chunk,

@@ -4,6 +4,7 @@ than memory split into pieces with the same results as one piece."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from geometry_precompute.settings import INT32_MAX, MAX_STARTS
-from sweeps.memory import evaluate_in_pieces
+from sweeps.memory import bytes_per_rollout, evaluate_in_pieces
 from sweeps.pipeline import evaluate_results
 
 SCENE = shipped_scene_paths()[8]
@@ -109,7 +110,7 @@ def test_grid_in_pieces_equals_one_piece(shipped_results):
 
     baked = bake(shipped_results[8:10])
     whole = evaluate_in_pieces(baked, shacc_jax.MODES, shacc_jax.evaluate, limit=2**40)
-    per_start = 600 * baked.n_scenes * baked.n_tasks * 3
+    per_start = bytes_per_rollout(False) * baked.n_scenes * baked.n_tasks * 3
     pieces = evaluate_in_pieces(baked, shacc_jax.MODES, shacc_jax.evaluate,
                                 limit=per_start * 10)  # 36 starts in 4 pieces of 10
     for a, b in zip(whole.rollouts, pieces.rollouts, strict=True):
@@ -126,7 +127,8 @@ def test_grid_in_pieces_equals_one_piece(shipped_results):
 def test_budget_from_the_environment_splits_evaluate(monkeypatch):
     r = precompute(load_scene(SCENE))
     whole = evaluate_results([r])
-    monkeypatch.setenv("SHACC_MEMORY_BUDGET", str(600 * 3 * 3 * 7))  # 7 starts per piece
+    # 7 starts per piece (3 tasks, 3 modes)
+    monkeypatch.setenv("SHACC_MEMORY_BUDGET", str(bytes_per_rollout(False) * 3 * 3 * 7))
     pieces = evaluate_results([r])
     np.testing.assert_array_equal(whole.evaluation.rollouts.outcome,
                                   pieces.evaluation.rollouts.outcome)
@@ -137,8 +139,36 @@ def test_budget_from_the_environment_splits_evaluate(monkeypatch):
 def test_one_start_that_does_not_fit_says_how_much_it_needs(monkeypatch):
     r = precompute(load_scene(SCENE))
     monkeypatch.setenv("SHACC_MEMORY_BUDGET", "1K")
-    with pytest.raises(InputError, match=r"needs 5\.3 KB, more than the budget of 1\.0 KB"):
+    need = f"{bytes_per_rollout(False) * 3 * 3 / 1024:.1f}".replace(".", r"\.")
+    with pytest.raises(InputError, match=rf"needs {need} KB, more than the budget of 1\.0 KB"):
         evaluate_results([r])
     monkeypatch.setenv("SHACC_MEMORY_BUDGET", "lots")
     with pytest.raises(InputError, match="SHACC_MEMORY_BUDGET"):
         evaluate_results([r])
+
+
+def test_collision_checks_are_budgeted_as_they_need(shipped_results):
+    """With collision checks on, a rollout needs several times the memory (measured:
+    benchmarks/RESULTS.md), so a budget that holds the plain batch in one piece splits the
+    checked one; its results equal the whole batch's."""
+    import shacc_jax
+    from geometry_precompute import bake
+
+    plain = bake(shipped_results[8:9])
+    checked = replace(plain, collision=np.ones_like(plain.collision))
+    assert bytes_per_rollout(True) >= 4 * bytes_per_rollout(False)
+    calls = []
+
+    def counting(geometry, params, layout):
+        calls.append(geometry.starts.shape[1])
+        return shacc_jax.evaluate(geometry, params, layout)
+
+    limit = bytes_per_rollout(False) * plain.n_tasks * 3 * plain.n_starts
+    evaluate_in_pieces(plain, shacc_jax.MODES, counting, limit=limit)
+    assert calls == [plain.n_starts]
+    calls.clear()
+    pieces = evaluate_in_pieces(checked, shacc_jax.MODES, counting, limit=limit)
+    assert len(calls) > 1 and max(calls) < plain.n_starts
+    whole = evaluate_in_pieces(checked, shacc_jax.MODES, shacc_jax.evaluate, limit=2**40)
+    np.testing.assert_array_equal(whole.rollouts.outcome, pieces.rollouts.outcome)
+    np.testing.assert_array_equal(whole.rollouts.step, pieces.rollouts.step)
