@@ -74,10 +74,11 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
     else:
         counts = cfg.task_counts()
         n, tasks_total, max_tasks = len(counts), float(sum(counts)), max(counts)
-    grids = [DEFAULTS.with_overrides(p)["start_grid"] for p in cfg.points]
-    if cfg.source["kind"] == "files":  # a scene file's own [settings] may set the grid
+    settings = [DEFAULTS.with_overrides(p) for p in cfg.points]
+    if cfg.source["kind"] == "files":  # a scene file's own [settings] may set these
         first = cfg.scenes()[0]
-        grids = [first.settings(DEFAULTS, p)["start_grid"] for p in cfg.points]
+        settings = [first.settings(DEFAULTS, p) for p in cfg.points]
+    grids = [s["start_grid"] for s in settings]
     rollouts = sum(int(np.prod(g)) for g in grids) * tasks_total * len(cfg.modes)
     # Precompute runs once per scene and distinct precompute-stage settings (the cache
     # serves the rest; a warm cache makes this part smaller than estimated).
@@ -102,7 +103,7 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
         "rollouts": rollouts / RATES[platform],
         "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
     }
-    collision = any(first.settings(DEFAULTS, p)["collision"] != "off" for p in cfg.points)
+    collision = any(s["collision"] != "off" for s in settings)
     per_chunk = memory.bytes_per_rollout(collision, platform) * \
         int(max(np.prod(g) for g in grids)) * max_tasks * \
         len(cfg.modes) * bucket(chunk) * max(len(g) for g in point_groups(cfg))

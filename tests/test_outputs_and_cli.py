@@ -168,6 +168,31 @@ def test_dry_run_does_not_build_random_scenes():
     assert 5 * 10_000_000 * 108 <= info["rollouts"] <= 10 * 10_000_000 * 108
 
 
+def test_dry_run_budgets_collision_checks(tmp_path):
+    """The per-chunk memory estimate follows the memory model: a point with collision
+    checks needs more than the same point without, for random and for file sources."""
+    from sweeps import memory
+    from sweeps.cluster import local_gpus
+    from sweeps.config import parse_config
+    from sweeps.runner import dry_run
+
+    platform = "gpu" if local_gpus() else "cpu"
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    (scenes / "a.toml").write_text(Path(SCENE).read_text())
+    sources = {"random": {"kind": "random", "count": 4},
+               "files": {"kind": "files", "path": str(scenes)}}
+    for kind, source in sources.items():
+        mb = {c: dry_run(parse_config({"name": "c", "source": source,
+                                       "settings": {"collision": c}}, "<test>", ROOT),
+                         workers=1)["estimated_memory_per_chunk_MB"]
+              for c in ("off", "mjx")}
+        assert mb["off"] > 0, kind
+        assert mb["mjx"] / mb["off"] == pytest.approx(
+            memory.bytes_per_rollout(True, platform) / memory.bytes_per_rollout(False, platform)
+        ), kind
+
+
 def test_generator_range_is_checked(tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('name = "t"\n[source]\nkind = "random"\ncount = 3\ntasks = [5, 200]\n')
