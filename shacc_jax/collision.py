@@ -9,15 +9,15 @@ the exported MJCF.
 
 A capsule penetrates a convex body by more than eps exactly when its axis segment
 comes within (radius - eps) of the body, so the check is a segment-to-solid distance:
-the distance to a cylinder or box is convex along the segment and a golden-section
-search finds its minimum to 1e-7 m. This replaced MJX's collision pipeline, whose
+the distance to a cylinder or box is convex along the segment and a bracketing search
+finds its minimum to 1e-7 m. This replaced MJX's collision pipeline, whose
 capsule-cylinder routine (a few gradient steps on the SDFs) reported distances up to
 8 mm too large near contact and cost 250-1 100x a rollout (benchmarks/RESULTS.md). CPU
 MuJoCo's ``mj_geomDistance`` on the same geoms is the reference in the tests.
 
 Most of the work is skipped without changing an outcome: :func:`path_window` keeps only
 the samples of a rollout at which the gripper can reach an object (closed form), and
-:func:`sample_penetrations` runs the search only on the (pose, capsule, object) pairs
+:func:`first_penetration` runs the search only on the (pose, capsule, object) pairs
 that a closed-form :func:`lower_bound` does not clear.
 
 The table is not an obstacle: start poses a few centimetres above it in random
@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from geometry_precompute.schema import BOX
 
@@ -41,6 +41,12 @@ PENETRATION_EPS = 1e-4  # m: a penetration deeper than this is a collision
 # Slack of the path cull (m): far above float32 rounding of metre-scale coordinates.
 CULL_MARGIN = 1e-3
 _TINY = 1e-12
+
+
+def _dot(u, v):
+    """u . v over the last axis (3), written out: a reduction ends an XLA GPU fusion and
+    writes its inputs to memory, where these products and sums fuse with what follows."""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
 
 
 def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
@@ -67,10 +73,6 @@ def gripper_reach(dims: Float[Array, "4"]) -> Array:
     return jnp.sqrt(length ** 2 + (0.5 * opening) ** 2) + jnp.maximum(r_f, r_p)
 
 
-# Golden-section iterations of the segment distance: the bracket ends at 0.618^30 of the
-# segment (1e-7 m for a 0.1 m palm), far below PENETRATION_EPS.
-GOLDEN_ITERATIONS = 30
-_INV_PHI = 0.6180339887498949
 
 
 def scene_objects(obj_kind, obj_center, obj_quat, obj_size, obj_mask):
@@ -81,40 +83,59 @@ def scene_objects(obj_kind, obj_center, obj_quat, obj_size, obj_mask):
 
 
 def _point_distance(x, kind, size):
-    """Euclidean distance from points x (..., 3), in an object's frame, to the solid
-    cylinder or box (0 inside)."""
-    radial = jnp.sqrt(x[..., 0] ** 2 + x[..., 1] ** 2)
-    dr = jnp.maximum(radial - size[..., 0], 0.0)
-    dz = jnp.maximum(jnp.abs(x[..., 2]) - size[..., 1], 0.0)
-    out = jnp.maximum(jnp.abs(x) - size, 0.0)
-    return jnp.where(kind == BOX, jnp.sqrt(jnp.sum(out * out, axis=-1)),
+    """Euclidean distance from points x ((x, y, z) tuple of arrays), in an object's frame,
+    to the solid cylinder or box (``size`` likewise a tuple; 0 inside). Elementwise
+    only, so that many evaluations fuse into one kernel."""
+    radial = jnp.sqrt(x[0] * x[0] + x[1] * x[1])
+    dr = jnp.maximum(radial - size[0], 0.0)
+    dz = jnp.maximum(jnp.abs(x[2]) - size[1], 0.0)
+    out = [jnp.maximum(jnp.abs(xi) - si, 0.0) for xi, si in zip(x, size, strict=True)]
+    return jnp.where(kind == BOX, jnp.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2]),
                      jnp.sqrt(dr * dr + dz * dz))
 
 
 def segment_distance(a, d, kind, size):
     """Distance from segments a + t d, t in [0, 1] (..., 3, object frame), to solid
-    cylinders or boxes: golden-section search over t. The distance to a convex body is
-    convex along a segment, so the search brackets the minimum; the result is within
-    |d| 0.618^GOLDEN_ITERATIONS above the exact distance, never below it."""
+    cylinders or boxes (``size`` (..., 3)). The distance to a convex body is convex along
+    a segment, so a search brackets the minimum: GRID_POINTS evenly spaced points per
+    step, the bracket narrowed to the best one's neighbours. The result is never below
+    the exact distance and at most |d| (2 / (GRID_POINTS + 1))^GRID_STEPS / 2 above it.
+
+    (A golden-section search needs fewer evaluations, but each of its steps depends on
+    the last evaluation, so on a GPU every evaluation became a kernel writing the
+    bracket to memory; a grid step's points are independent and fuse into one kernel.
+    Faster on the H100 and on the CPU: benchmarks/RESULTS.md.)"""
     def f(t):
-        return _point_distance(a + t[..., None] * d, kind, size)
+        return _point_distance(tuple(a[..., i] + t * d[..., i] for i in range(3)), kind,
+                               tuple(size[..., i] for i in range(3)))
 
-    zero = jnp.zeros(a.shape[:-1], a.dtype)
+    return _grid_minimum(f, jnp.zeros(a.shape[:-1], a.dtype))
+
+
+# The grid search's points per step and steps: the bracket ends at (2/9)^10 = 2.9e-7 of
+# the segment (3e-8 m for a 0.1 m palm), the best point within half of that of the
+# minimum, far below PENETRATION_EPS.
+GRID_POINTS = 8
+GRID_STEPS = 10
+
+
+def _grid_minimum(f, zero):
+    """The minimum of a convex f on [0, 1] (elementwise over zero's shape): for convex f
+    the minimiser lies between the neighbours of the best of evenly spaced points. The
+    steps are a loop, not unrolled: each is one fused kernel either way, and the
+    unrolled form took 50 % longer to compile."""
+    def step(_, state):
+        lo, width, best = state
+        h = width / (GRID_POINTS + 1)
+        low, at = f(lo + h), jnp.zeros_like(zero)
+        for i in range(1, GRID_POINTS):
+            v = f(lo + (i + 1) * h)
+            better = v < low
+            low, at = jnp.where(better, v, low), jnp.where(better, float(i), at)
+        return lo + at * h, 2.0 * h, jnp.minimum(best, low)
+
     one = jnp.ones_like(zero)
-    lo, hi = zero, one
-    x1, x2 = hi - _INV_PHI, lo + _INV_PHI
-    f1, f2 = f(x1), f(x2)
-
-    # Unrolled: one fused elementwise program instead of a loop whose every iteration
-    # writes the whole bracket state to memory (see benchmarks/RESULTS.md).
-    for _ in range(GOLDEN_ITERATIONS):
-        left = f1 <= f2  # the minimum lies in [lo, x2]
-        lo, hi = jnp.where(left, lo, x1), jnp.where(left, x2, hi)
-        new = jnp.where(left, hi - _INV_PHI * (hi - lo), lo + _INV_PHI * (hi - lo))
-        f_new = f(new)
-        x1, x2 = jnp.where(left, new, x2), jnp.where(left, x1, new)
-        f1, f2 = jnp.where(left, f_new, f2), jnp.where(left, f1, f_new)
-    return jnp.minimum(jnp.minimum(f1, f2), jnp.minimum(f(zero), f(one)))
+    return jax.lax.fori_loop(0, GRID_STEPS, step, (zero, one, jnp.minimum(f(zero), f(one))))[2]
 
 
 def _into_frames(mat, v):
@@ -158,16 +179,51 @@ def lower_bound(a, d, kind, size):
     solid cylinders or boxes, in closed form: per box axis, or for a cylinder along its
     axis and radially, the gap between the segment's range and the solid's; the
     Euclidean norm of the gaps bounds every point's distance from below."""
-    lo, hi = jnp.minimum(a, a + d), jnp.maximum(a, a + d)
-    gaps = jnp.maximum(jnp.maximum(lo - size, -size - hi), 0.0)
-    box = jnp.sqrt(jnp.sum(gaps * gaps, axis=-1))
-    dxy = d[..., :2]
-    t = jnp.clip(-jnp.sum(a[..., :2] * dxy, -1) / jnp.maximum(jnp.sum(dxy * dxy, -1), _TINY),
-                 0.0, 1.0)
-    radial = jnp.sqrt(jnp.sum((a[..., :2] + t[..., None] * dxy) ** 2, axis=-1))
-    gap_r = jnp.maximum(radial - size[..., 0], 0.0)
-    gap_z = jnp.maximum(jnp.maximum(lo[..., 2] - size[..., 1], -size[..., 1] - hi[..., 2]), 0.0)
+    return _lower_bound_xyz(tuple(a[..., i] for i in range(3)),
+                            tuple(d[..., i] for i in range(3)), kind,
+                            tuple(size[..., i] for i in range(3)))
+
+
+def _lower_bound_xyz(a, d, kind, size):
+    """:func:`lower_bound` on (x, y, z) tuples of arrays: elementwise only, so that the
+    pose, the frames and the bound fuse into one kernel."""
+    gaps = []
+    for ai, di, si in zip(a, d, size, strict=True):
+        lo, hi = jnp.minimum(ai, ai + di), jnp.maximum(ai, ai + di)
+        gaps.append(jnp.maximum(jnp.maximum(lo - si, -si - hi), 0.0))
+    box = jnp.sqrt(gaps[0] * gaps[0] + gaps[1] * gaps[1] + gaps[2] * gaps[2])
+    t = jnp.clip(-(a[0] * d[0] + a[1] * d[1])
+                 / jnp.maximum(d[0] * d[0] + d[1] * d[1], _TINY), 0.0, 1.0)
+    rx, ry = a[0] + t * d[0], a[1] + t * d[1]
+    gap_r = jnp.maximum(jnp.sqrt(rx * rx + ry * ry) - size[0], 0.0)
+    lo_z, hi_z = jnp.minimum(a[2], a[2] + d[2]), jnp.maximum(a[2], a[2] + d[2])
+    gap_z = jnp.maximum(jnp.maximum(lo_z - size[1], -size[1] - hi_z), 0.0)
     return jnp.where(kind == BOX, box, jnp.sqrt(gap_r * gap_r + gap_z * gap_z))
+
+
+def _capsule_axes_xyz(p, q, dims):
+    """The gripper's capsule axes at poses (p, q) (..., 3), (..., 4) as segments
+    start + t extent, t in [0, 1], in world coordinates, with their radii: three
+    (start, extent, radius), start and extent (x, y, z) tuples; the same capsules as
+    :func:`gripper_geoms`, written elementwise (``dims`` (..., 4) broadcasts)."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    ey = (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x))  # R[:, 1]
+    ez = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))  # R[:, 2]
+    length, r_f, opening, r_p = (dims[..., i] for i in range(4))
+    palm = tuple(p[..., i] - length * ez[i] for i in range(3))  # the palm's centre
+    half = 0.5 * opening
+    return [(tuple(palm[i] + half * ey[i] for i in range(3)),
+             tuple(length * ez[i] for i in range(3)), r_f),
+            (tuple(palm[i] - half * ey[i] for i in range(3)),
+             tuple(length * ez[i] for i in range(3)), r_f),
+            (tuple(palm[i] - half * ey[i] for i in range(3)),
+             tuple(opening * ey[i] for i in range(3)), r_p)]
+
+
+def _in_frame_xyz(mat, v):
+    """v ((x, y, z) tuple) in the frames with rotation matrices mat (..., 3, 3): mat^T v."""
+    return tuple(mat[..., 0, i] * v[0] + mat[..., 1, i] * v[1] + mat[..., 2, i] * v[2]
+                 for i in range(3))
 
 
 # Objects a rollout is checked against when it can touch no more than these (most can
@@ -179,32 +235,57 @@ OBJECT_SLOTS = 4
 ROUND_SHARE = 32
 
 
-def sample_penetrations(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"],
-                        dims: Float[Array, "B 4"], live: Bool[Array, "B W"]
-                        ) -> Bool[Array, "B W"]:
-    """Whether the gripper penetrates an object by more than eps at each of W poses of
-    B lanes (``objects``: each lane's scene, :func:`scene_objects`' output with a
-    leading B axis), where ``live``: :func:`penetrates`' decision, pose by pose.
+def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"],
+                      dims: Float[Array, "B 4"], live: Bool[Array, "B W"]) -> Int[Array, " B"]:
+    """The first of W poses of each of B lanes at which the gripper penetrates an object
+    by more than eps (W for none), as :func:`penetrates` decides pose by pose, among the
+    poses where ``live`` (``objects``: each lane's scene, :func:`scene_objects`' output
+    with a leading B axis).
 
-    The closed-form :func:`lower_bound` clears most (pose, capsule, object) pairs; the
-    rest, those that can penetrate, are numbered (a running count over the poses, then
-    over each pose's pairs), gathered into rounds of 1/ROUND_SHARE of all pairs and
-    searched exactly, as many rounds as they need. (Looking each round's pairs up by a
-    binary search of the running count instead of scattering them was slower on an
-    H100: benchmarks/RESULTS.md.)"""
-    kind, _, _, size, mask = objects
+    Per (pose, capsule, object) pair, in one fused pass: the closed-form
+    :func:`lower_bound` clears most pairs, and an upper bound (the distance of the axis'
+    ends and middle to the object) settles the pairs that surely penetrate. Only the
+    pairs between the two, at poses before the lane's first sure penetration, are
+    searched exactly: numbered (a running count over the poses, then over each pose's
+    pairs), gathered into rounds of 1/ROUND_SHARE of all pairs, as many rounds as they
+    need. (Looking each round's pairs up by a binary search of the running count
+    instead of scattering them was slower on an H100: benchmarks/RESULTS.md.)"""
+    kind, centre, mat, size, mask = objects
     B, W = live.shape
     C, O = 3, kind.shape[1]
-    per_pose = jax.vmap(jax.vmap(pair_axes, (None, 0, 0, None)), (0, 0, 0, 0))
-    a, d, radius = per_pose(objects, p, q, dims)  # (B, W, C, O, 3), (B, W, C)
-    bound = lower_bound(a, d, kind[:, None, None, :], size[:, None, None, :, :])
-    candidate = (live[:, :, None, None] & mask[:, None, None, :]
-                 & (bound < radius[..., None] - PENETRATION_EPS + 1e-6))
-    # 1e-6 m of slack: the bound's rounding must not clear a pair the search finds.
-    candidate = candidate.reshape(B * W, C * O)
-    count = jnp.sum(candidate, axis=1, dtype=jnp.int32)
+    # Poses (B, W, 1) against objects (B, 1, O), component by component: one fused kernel
+    # from the poses to the flags, no (..., 3) intermediate written to memory.
+    pose_axes = _capsule_axes_xyz(p[:, :, None, :], q[:, :, None, :], dims[:, None, None, :])
+    o_centre = tuple(centre[:, None, :, i] for i in range(3))
+    o_mat, o_kind = mat[:, None], kind[:, None, :]
+    o_size = tuple(size[:, None, :, i] for i in range(3))
+    near = live[:, :, None] & mask[:, None, :]
+    maybe, sure = [], jnp.zeros((B, W), bool)
+    for start, extent, radius in pose_axes:
+        a = _in_frame_xyz(o_mat, tuple(s - c for s, c in zip(start, o_centre, strict=True)))
+        d = _in_frame_xyz(o_mat, extent)
+        thr = radius - PENETRATION_EPS
+        # 1e-6 m of slack: the bound's rounding must not clear a pair the search finds.
+        maybe.append(near & (_lower_bound_xyz(a, d, o_kind, o_size) < thr + 1e-6))
+        upper = _point_distance(a, o_kind, o_size)
+        for t in (0.5, 1.0):
+            upper = jnp.minimum(upper, _point_distance(
+                tuple(ai + t * di for ai, di in zip(a, d, strict=True)), o_kind, o_size))
+        sure = sure | jnp.any(near & (upper < thr), axis=2)
+    first_sure = jnp.where(jnp.any(sure, axis=1), jnp.argmax(sure, axis=1), W)
+    # Only poses before the lane's first sure penetration can decide its first one.
+    before_sure = jnp.arange(W)[None, :] < first_sure[:, None]
+    flags = [(f & before_sure[:, :, None]).reshape(B * W, O) for f in maybe]
+    # The running count within each pose, written out over its C x O pairs (no scan).
+    within, total = [], jnp.zeros(B * W, jnp.int32)
+    for f in flags:
+        for o in range(O):
+            total = total + f[:, o].astype(jnp.int32)
+            within.append(total)
+    candidate = jnp.concatenate(flags, axis=1)
+    count = total
     before = jnp.cumsum(count) - count
-    rank = (before[:, None] + jnp.cumsum(candidate, axis=1, dtype=jnp.int32) - 1).reshape(-1)
+    rank = (before[:, None] + jnp.stack(within, axis=1) - 1).reshape(-1)
     candidate = candidate.reshape(-1)
     n = candidate.shape[0]
     K = max(1, -(-n // ROUND_SHARE))
@@ -231,7 +312,8 @@ def sample_penetrations(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 
         return hit.at[jnp.where(idx < n, pose, B * W)].max(pen, mode="drop")
 
     hit = jax.lax.fori_loop(0, rounds, one_round, jnp.zeros(B * W, bool))
-    return hit.reshape(B, W)
+    hit = hit.reshape(B, W) & before_sure
+    return jnp.where(jnp.any(hit, axis=1), jnp.argmax(hit, axis=1), first_sure)
 
 
 def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
@@ -252,13 +334,13 @@ def _linear_interval(a, b, lo, hi):
 def _line_sphere(u, c, rho):
     """The t with |t u - c| <= rho (u a unit vector or zero)."""
     inf = jnp.asarray(jnp.inf, rho.dtype)
-    b = jnp.sum(u * c, axis=-1)
-    uu = jnp.sum(u * u, axis=-1)
-    disc = b * b - uu * (jnp.sum(c * c, axis=-1) - rho * rho)
+    b = _dot(u, c)
+    uu = _dot(u, u)
+    disc = b * b - uu * (_dot(c, c) - rho * rho)
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
     moving = uu > _TINY
     safe = jnp.where(moving, uu, 1.0)
-    still = jnp.sum(c * c, axis=-1) <= rho * rho  # u = 0: all t or none
+    still = _dot(c, c) <= rho * rho  # u = 0: all t or none
     lo = jnp.where(moving, jnp.where(disc >= 0, (b - root) / safe, inf),
                    jnp.where(still, -inf, inf))
     hi = jnp.where(moving, jnp.where(disc >= 0, (b + root) / safe, -inf),
@@ -273,13 +355,13 @@ def _line_capsule(u, a, e, rho):
     inf = jnp.asarray(jnp.inf, rho.dtype)
     lo_a, hi_a = _line_sphere(u, a, rho)
     lo_b, hi_b = _line_sphere(u, a + e, rho)
-    length = jnp.sqrt(jnp.sum(e * e, axis=-1))
+    length = jnp.sqrt(_dot(e, e))
     axis = e / jnp.maximum(length, _TINY)[..., None]
-    ua, aa = jnp.sum(u * axis, axis=-1), jnp.sum(a * axis, axis=-1)
+    ua, aa = _dot(u, axis), _dot(a, axis)
     up, ap = u - ua[..., None] * axis, a - aa[..., None] * axis
-    A = jnp.sum(up * up, axis=-1)
-    B = jnp.sum(up * ap, axis=-1)
-    disc = B * B - A * (jnp.sum(ap * ap, axis=-1) - rho * rho)
+    A = _dot(up, up)
+    B = _dot(up, ap)
+    disc = B * B - A * (_dot(ap, ap) - rho * rho)
     ok = (A > _TINY) & (disc >= 0)  # near-parallel lines: the end spheres cover them
     safe = jnp.where(ok, A, 1.0)
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
@@ -302,14 +384,14 @@ def _line_rounded_parallelogram(u, c0, e1, e2, rho):
         l, h = _line_capsule(u, a, e, rho)
         lo, hi = jnp.minimum(lo, l), jnp.maximum(hi, h)
     n = jnp.cross(e1, e2)
-    area = jnp.sqrt(jnp.sum(n * n, axis=-1))
+    area = jnp.sqrt(_dot(n, n))
     flat = area > 1e-6  # a thinner face lies within 1e-6 m of its edges
     safe = jnp.where(flat, area, 1.0)[..., None]
     n = n / safe
     m1, m2 = jnp.cross(e2, n) / safe, jnp.cross(n, e1) / safe  # dual basis of the face
-    f_lo, f_hi = _linear_interval(jnp.sum(u * n, -1), -jnp.sum(c0 * n, -1), -rho, rho)
+    f_lo, f_hi = _linear_interval(_dot(u, n), -_dot(c0, n), -rho, rho)
     for m in (m1, m2):
-        l, h = _linear_interval(jnp.sum(u * m, -1), -jnp.sum(c0 * m, -1), 0.0, 1.0)
+        l, h = _linear_interval(_dot(u, m), -_dot(c0, m), 0.0, 1.0)
         f_lo, f_hi = jnp.maximum(f_lo, l), jnp.minimum(f_hi, h)
     face = flat & (f_lo <= f_hi)
     return (jnp.minimum(lo, jnp.where(face, f_lo, inf)),

@@ -34,6 +34,11 @@ from . import program_cache, tracking
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts, SceneMetrics
 
+# With collision checks, a block of the lane scheduler takes 1/share of the lanes of one
+# without, by backend (None: accelerators). Measured on an H100 (a quarter, half, all:
+# 0.63, 0.59, 0.72 s for 10 000 scenes): benchmarks/RESULTS.md.
+COLLISION_BLOCK_SHARE = {"cpu": 1, None: 2}
+
 
 def _numbers(params: Params, dtype):
     tau = params.activation_tol
@@ -58,47 +63,52 @@ def activation_pass(geometry: Geometry, params: Params, which: str):
     return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3], jnp.arange(T))
 
 
-def _windows(geometry: Geometry, params: Params, lanes: tracking.Lanes, act_step: Array,
+def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
              prep: tracking.Prepared | None, collide: bool):
-    """Per lane: the meta window (tracking) and the collision window, each (from, to)
-    samples, empty when from > to; the joined window's start and length; and which
-    objects the gripper can touch in the collision window (L, O). ``prep``: the
-    tracking's prepared spaces, None without tracking."""
+    """Per lane (L = S N T, in lane order): the meta window (tracking) and the collision
+    window, each (from, to) samples, empty when from > to; the joined window's start and
+    length; and which objects the gripper can touch in the collision window (L, O).
+    ``path`` and ``act_step``: (S, N, T); ``prep``: the tracking's prepared spaces, None
+    without tracking. Mapped over scenes, then starts and tasks, so that a scene's
+    arrays are read in place rather than gathered once per lane."""
     dtype = geometry.starts.dtype
     inf = jnp.asarray(jnp.inf, dtype)
-    if collide:
-        bounds = jax.vmap(col.object_bounds)(geometry.obj_kind, geometry.obj_center,
-                                             geometry.obj_quat, geometry.obj_size)
+    S, N, T = act_step.shape
+    bounds = (jax.vmap(col.object_bounds)(geometry.obj_kind, geometry.obj_center,
+                                          geometry.obj_quat, geometry.obj_size)
+              if collide else None)
+    init = prep.init if prep is not None else None
 
-    def one(s, n, path, k_act):
-        g = jax.tree.map(lambda a: a[s], geometry)
-        p = jax.tree.map(lambda a: a[s], params)
+    def per_scene(g, p, path, k_act, init, bounds):
         x = _numbers(p, dtype)
-        if prep is not None:
-            init = jax.tree.map(lambda a: a[s], prep.init)
-            m_from, m_to = am.meta_window(init, g.task_mask, g.cluster, path, k_act,
-                                          x["max_steps"], x["grow"])
-        else:
-            m_from, m_to = inf, -inf
-        if collide:
-            turn_from = jnp.where(m_from <= m_to, m_from, inf)
-            first, last = col.path_window(jax.tree.map(lambda a: a[s], bounds), g.obj_center,
-                                          g.obj_mask, p.gripper(), g.starts[n, 3:], path,
-                                          turn_from, x["max_steps"])
-            end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
-            touch = p.collision & (first <= jnp.minimum(last, end))
-            c_from = jnp.min(jnp.where(touch, first, inf))
-            c_to = jnp.minimum(jnp.max(jnp.where(touch, last, -inf)), end)
-        else:
-            c_from, c_to = inf, -inf
-            touch = jnp.zeros(g.obj_mask.shape, bool)
-        return m_from, m_to, c_from, c_to, touch
 
-    m_from, m_to, c_from, c_to, touch = jax.vmap(one)(lanes.scene, lanes.start, lanes.path,
-                                                      act_step)
+        def one(start, path, k_act):
+            if init is not None:
+                m_from, m_to = am.meta_window(init, g.task_mask, g.cluster, path, k_act,
+                                              x["max_steps"], x["grow"])
+            else:
+                m_from, m_to = inf, -inf
+            if collide:
+                turn_from = jnp.where(m_from <= m_to, m_from, inf)
+                first, last = col.path_window(bounds, g.obj_center, g.obj_mask, p.gripper(),
+                                              start[3:], path, turn_from, x["max_steps"])
+                end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
+                touch = p.collision & (first <= jnp.minimum(last, end))
+                c_from = jnp.min(jnp.where(touch, first, inf))
+                c_to = jnp.minimum(jnp.max(jnp.where(touch, last, -inf)), end)
+            else:
+                c_from, c_to = inf, -inf
+                touch = jnp.zeros(g.obj_mask.shape, bool)
+            return m_from, m_to, c_from, c_to, touch
+
+        over_tasks = jax.vmap(one, (None, 0, 0))
+        return jax.vmap(over_tasks, (0, 0, 0))(g.starts, path, k_act)
+
+    out = jax.vmap(per_scene)(geometry, params, path, act_step, init, bounds)
+    m_from, m_to, c_from, c_to, touch = (a.reshape(S * N * T, *a.shape[3:]) for a in out)
     # Padded target tasks get an empty window: their outcome is INVALID anyway, and in a
     # batch of 5- to 10-task scenes padded to 10 they are up to half of the lanes.
-    real = geometry.task_mask[lanes.scene, lanes.task]
+    real = jnp.broadcast_to(geometry.task_mask[:, None, :], (S, N, T)).reshape(-1)
     m_ok, c_ok = m_from <= m_to, c_from <= c_to
     w_from = jnp.minimum(jnp.where(m_ok, m_from, inf), jnp.where(c_ok, c_from, inf))
     w_to = jnp.maximum(jnp.where(m_ok, m_to, -inf), jnp.where(c_ok, c_to, -inf))
@@ -134,7 +144,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
     lanes = tracking.Lanes.of(path)
     prep = tracking.prepare(geometry) if track else None
     (m_from, m_to), (c_from, c_to), w_from, length, touch = _windows(
-        geometry, params, lanes, act.step.reshape(L), prep, collide)
+        geometry, params, path, act.step, prep, collide)
     O = geometry.obj_mask.shape[1]
     J = min(O, col.OBJECT_SLOTS)
     if collide:
@@ -152,8 +162,8 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
         G = 1
 
     def penetrations(idx, k, r_at, valid, group):
-        """(B, W): whether the gripper penetrates one of the lanes' objects of ``group``
-        at each sample."""
+        """(B,): the first sample of the block at which the gripper penetrates one of
+        the lanes' objects of ``group`` (W for none)."""
         p = jnp.moveaxis(lanes.points(idx, k), 0, -1)
         s = lanes.scene[idx]
         kind, centre, mat, size, mask = objects
@@ -162,7 +172,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
         picked = [x[s[:, None], take] for x in (kind, centre, mat, size)]
         # Objects that cannot be touched in the lane's window are left out exactly.
         reachable = mask[s[:, None], take] & (rank[None, :] < count[idx][:, None])
-        return col.sample_penetrations((*picked, reachable), p, r_at, gripper[s], valid)
+        return col.first_penetration((*picked, reachable), p, r_at, gripper[s], valid)
 
     def per_block(formula, group, idx, start, valid, rows):
         r_b, n_b, hit_b = rows
@@ -183,10 +193,12 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
             r_at = jnp.broadcast_to(r_b[:, None, :], (B, W, 4))
             turned = jnp.zeros((B, W), bool)
         if collide:
-            c_valid = valid & (k >= c_from[idx][:, None]) & (k <= c_to[idx][:, None])
-            pen = penetrations(idx, k, r_at, c_valid, group)
-            first = jnp.argmax(pen, axis=1)
-            hit_now = jnp.any(pen, axis=1) & alive
+            # A lane that collided in an earlier block is not checked again.
+            c_valid = (valid & alive[:, None] & (k >= c_from[idx][:, None])
+                       & (k <= c_to[idx][:, None]))
+            first = penetrations(idx, k, r_at, c_valid, group)
+            hit_now = first < W
+            first = jnp.minimum(first, W - 1)
             upto = jnp.where(hit_now, first, W)
             r_end = jnp.where(hit_now[:, None], r_at[jnp.arange(B), first], r_end)
             hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
@@ -307,9 +319,9 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         track = mode == "shacc"
         if track or layout.collision_checks:
             # With collision checks a block holds (lanes x samples x capsules x objects)
-            # pairs: a quarter of the lanes on an accelerator; on a CPU all of them (fewer,
-            # fuller rounds of the exact search). Measured: benchmarks/RESULTS.md.
-            share = 1 if jax.default_backend() == "cpu" else 4
+            # pairs: COLLISION_BLOCK_SHARE (half the lanes on an accelerator; on a CPU all
+            # of them: fewer, fuller rounds of the exact search).
+            share = COLLISION_BLOCK_SHARE.get(jax.default_backend(), COLLISION_BLOCK_SHARE[None])
             block = max(1, lanes_per_block // share) if layout.collision_checks else lanes_per_block
             r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track, block)
             out = _collided(out, path, hit)
