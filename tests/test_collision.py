@@ -55,6 +55,26 @@ def test_gripper_capsules_match_the_reference_layout():
         np.testing.assert_allclose(sizes, ref.model.geom_size[ref.capsules, :2], atol=1e-7)
 
 
+def test_elementwise_capsule_axes_are_the_gripper_geoms():
+    """The fused pair check's capsule axes (``_capsule_axes_xyz``) are the segments of
+    ``gripper_geoms``' capsules (centre -/+ half length along the local z), with their
+    radii, on random poses and gripper sizes."""
+    rng = np.random.default_rng(5)
+    n = 50
+    p = jnp.asarray(rng.normal(size=(n, 3)) * 0.1, jnp.float32)
+    q = jnp.asarray(np.roll(Rotation.random(n, random_state=rng).as_quat(), 1, axis=1),
+                    jnp.float32)
+    dims = jnp.asarray(np.column_stack([rng.uniform(0.05, 0.12, n), rng.uniform(0.005, 0.02, n),
+                                        rng.uniform(0.04, 0.12, n), rng.uniform(0.005, 0.02, n)]),
+                       jnp.float32)
+    centres, mats, sizes = jax.vmap(col.gripper_geoms)(p, q, dims)
+    half = mats[..., 2] * sizes[..., 1:2]  # (n, 3 capsules, 3)
+    for c, (start, extent, radius) in enumerate(col._capsule_axes_xyz(p, q, dims)):
+        np.testing.assert_allclose(np.stack(start, -1), centres[:, c] - half[:, c], atol=1e-6)
+        np.testing.assert_allclose(np.stack(extent, -1), 2 * half[:, c], atol=1e-6)
+        np.testing.assert_allclose(radius, sizes[:, c, 0])
+
+
 def test_penetrations_agree_with_cpu_mujoco():
     """10^5 random gripper poses among two cylinders and a yawed box, against CPU
     MuJoCo's ``mj_geomDistance`` on the same geoms: no penetration deeper than 0.1 mm
