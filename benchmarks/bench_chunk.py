@@ -1,5 +1,6 @@
-"""Where an evaluation worker's time goes for one sweep chunk: the join of the precompute
-tasks' bakes, the evaluation, the tables; then a profile of one chunk.
+"""Where the time goes for one sweep chunk after its precompute: on the evaluation worker
+the join of the precompute tasks' bakes and the evaluation, then the tables (a CPU
+worker's task in a sweep); then a profile of the evaluation worker's part.
 
     python benchmarks/bench_chunk.py [--scenes 1024] [--workers 16] [--repeat 3]
 
@@ -27,7 +28,7 @@ def main() -> None:
     from sweeps import compile_cache
     from sweeps.cluster import connect
     from sweeps.config import parse_config
-    from sweeps.evaluation_worker import ChunkJob, evaluate_chunk
+    from sweeps.evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk
     from sweeps.plan import plan, precompute_batches, shapes
     from sweeps.workers import precompute_batch
 
@@ -48,8 +49,11 @@ def main() -> None:
     job = ChunkJob(chunk, ({},), cfg.modes, shp, ())
     for k in range(args.repeat):
         t = time.perf_counter()
-        res = evaluate_chunk(job, *batches)
-        print(f"chunk {k}: {time.perf_counter() - t:.3f} s "
+        arrays = evaluate_chunk(job, *batches)
+        t1 = time.perf_counter()
+        res = encode_chunk(job, arrays)  # on a CPU worker in a sweep
+        print(f"chunk {k}: evaluation worker {t1 - t:.3f} s, "
+              f"tables {time.perf_counter() - t1:.3f} s "
               f"{ {k: round(v, 3) for k, v in res.seconds.items()} } "
               f"compiled {res.compiled} loaded {res.loaded}, {res.n_rollouts} rollouts")
     prof = cProfile.Profile()

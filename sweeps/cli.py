@@ -185,6 +185,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     # process never loads JAX.
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
         compile_cache.enable()
+    if args.command == "sweep" and not (args.dry_run or args.scheduler):
+        # First thing: the local cluster's fork server imports the workers' modules while
+        # this process reads the config and imports its own (a config that names a
+        # scheduler leaves the server unused; it ends with this process).
+        from .cluster import start_fork_server
+
+        start_fork_server()
     module, name = args.func.split(":")
     try:
         func = getattr(importlib.import_module(f"{__package__}.{module}"), name)

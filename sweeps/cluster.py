@@ -7,10 +7,14 @@ Two kinds of worker, told apart by Dask resources:
   CPU where there is no GPU (``sweeps.evaluation_worker``).
 
 By default :func:`connect` starts a local cluster of both kinds in this process (the
-scheduler and the nannies run in its event loop; each worker is a process of its own)
-and closes it when the sweep ends, also on Ctrl-C and on errors. Worker processes
-die with this process even when it is killed with SIGKILL: distributed's nanny hands
-each a pipe whose closing makes it exit at once.
+scheduler and the nannies run in its event loop; each worker is a process of its own,
+forked from a server that has imported the workers' modules once,
+:func:`start_fork_server`) and closes it when the sweep ends, also on Ctrl-C and on
+errors. Worker processes die with this process even when it is killed with SIGKILL:
+distributed's nanny hands each a pipe whose closing makes it exit at once, and the fork
+server exits when the last of them has. Each evaluation worker starts its warm-up (JAX,
+the accelerator, the first chunk's program) with its process
+(``evaluation_worker.start_early_warm_up``), while the other workers start.
 
 Given a scheduler address, it connects to an existing cluster instead, which it
 neither starts nor stops. Workers started with ``--resources precompute=1`` take the
@@ -80,33 +84,84 @@ def dask_setup(worker) -> None:
     and the command, not each worker, decides what it means (the cluster is closed).
     The precompute workers run at a lower priority (nice 5): with one per core, they
     would otherwise take CPU time from the evaluation worker's compilation and from the
-    host loop that drives the accelerator, which every chunk waits on. (Starting JAX on
-    the evaluation worker here, in the foreground or in a thread, made the sweep no
-    faster: measured, benchmarks/RESULTS.md.)"""
+    host loop that drives the accelerator, which every chunk waits on. An evaluation
+    worker given a warm-up (``evaluation_worker.WARM_UP_ENV``) starts it in a thread
+    here. (Only starting JAX here, in the foreground or in a thread, made the sweep no
+    faster; the whole warm-up, with the fork server, did: benchmarks/RESULTS.md.)"""
     with contextlib.suppress(ValueError):  # not the main thread: nothing to do
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     if PRECOMPUTE in (worker.state.total_resources or {}):
         with contextlib.suppress(OSError):
             os.nice(5)
+    elif EVALUATE in (worker.state.total_resources or {}):
+        from .evaluation_worker import WARM_UP_ENV, start_early_warm_up
+
+        if os.environ.get(WARM_UP_ENV):
+            start_early_warm_up(os.environ[WARM_UP_ENV])
 
 
 
-def _local(workers: int | None) -> tuple[object, int, int]:
+# What every local worker imports, loaded once in the fork server (below) rather than by
+# each new interpreter. Kept to what is light: the server imports one module after
+# another, and a long list (pandas, pyarrow, scipy, the mesh libraries) made the workers
+# start later than spawning them did (benchmarks/RESULTS.md). Never JAX: an evaluation
+# worker is pinned to its GPU by a variable that JAX reads when it starts.
+FORK_PRELOAD = ("distributed", "sweeps.cluster", "sweeps.workers", "sweeps.evaluation_worker")
+# What distributed's nanny sets before it starts a worker (its
+# distributed.nanny.pre-spawn-environ defaults): the fork server imports NumPy, so they
+# must be set before the server starts.
+PRE_SPAWN = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+             "MALLOC_TRIM_THRESHOLD_": "65536"}
+
+
+def start_fork_server() -> bool:
+    """Have this process's local clusters fork their worker processes from a server that
+    has imported :data:`FORK_PRELOAD` once (``multiprocessing``'s forkserver, through
+    distributed's ``multiprocessing-method``), and start that server now, so that its
+    imports run while this process goes on with its own. Idempotent. The server ends
+    when this process and every worker forked from it have ended (it waits on a pipe
+    that each of them holds), SIGKILL included. False where the platform has no fork
+    server: the workers are then spawned, each importing anew."""
+    import multiprocessing
+    import multiprocessing.forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    import dask
+
+    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
+    for k, v in PRE_SPAWN.items():
+        os.environ.setdefault(k, v)
+    multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORK_PRELOAD))
+    multiprocessing.forkserver.ensure_running()
+    return True
+
+
+def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
     from distributed import Nanny, Scheduler, SpecCluster
 
+    start_fork_server()
     n_cpu = workers or os.cpu_count() or 1
     gpus = local_gpus()
     # Workers log nothing below CRITICAL: a closing cluster makes them log connection
     # errors (with tracebacks) that are no error of the sweep's; task errors reach the
     # command through their futures.
     base = {"nthreads": 1, "preload": ["sweeps.cluster"], "silence_logs": logging.CRITICAL}
+    # This process's environment as it is now, as a spawned worker would inherit it (a
+    # forked one has the fork server's, from when the server started).
+    here = {**os.environ, **QUIET}
     spec = {f"precompute-{i}": {"cls": Nanny, "options": {
-        **base, "resources": {PRECOMPUTE: 1}, "env": dict(QUIET)}} for i in range(n_cpu)}
-    evals = [{"CUDA_VISIBLE_DEVICES": g} for g in gpus] or [{"JAX_PLATFORMS": "cpu"}]
+        **base, "resources": {PRECOMPUTE: 1}, "env": here}} for i in range(n_cpu)}
+    # An evaluation worker allocates GPU memory as it needs it: reserving 75 % of an H100
+    # up front took 0.9 s of every sweep's start (benchmarks/RESULTS.md); the budget
+    # (sweeps.memory) reads the allocator's limit either way. A user's setting wins.
+    alloc = {"XLA_PYTHON_CLIENT_PREALLOCATE":
+             os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE", "false")}
+    evals = [{"CUDA_VISIBLE_DEVICES": g, **alloc} for g in gpus] or [{"JAX_PLATFORMS": "cpu"}]
     for i, env in enumerate(evals):
         spec[f"evaluate-{i}"] = {"cls": Nanny, "options": {
             **base, "resources": {EVALUATE: 1}, "memory_limit": 0,
-            "env": {**QUIET, **env}}}
+            "env": {**here, **env, **warm_up}}}
     scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0"}}
     cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.CRITICAL,
                           name="shacc-sweep")
@@ -115,9 +170,11 @@ def _local(workers: int | None) -> tuple[object, int, int]:
 
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None,
-            timeout: float = 60.0) -> Iterator[Pool]:
+            timeout: float = 60.0, warm_up: dict | None = None) -> Iterator[Pool]:
     """A :class:`Pool` on a new local cluster (``scheduler`` None; ``workers``: its
-    precompute processes, default one per core) or on the cluster at ``scheduler``."""
+    precompute processes, default one per core) or on the cluster at ``scheduler``.
+    ``warm_up``: environment variables of a local cluster's evaluation workers
+    (``evaluation_worker.warm_up_env``: the warm-up they start with their process)."""
     import warnings
 
     from distributed import Client
@@ -128,7 +185,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
         # distributed warns when a port is taken (it picks another) or bokeh is missing.
         warnings.simplefilter("ignore")
         if scheduler is None:
-            cluster, n_cpu, n_eval = _local(workers)
+            cluster, n_cpu, n_eval = _local(workers, warm_up or {})
             client = Client(cluster)
         else:
             try:

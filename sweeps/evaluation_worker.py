@@ -12,7 +12,9 @@ caused are counted with JAX's monitoring events and reported.
 
 from __future__ import annotations
 
+import base64
 import os
+import pickle
 import socket
 import threading
 import time
@@ -84,11 +86,55 @@ def _setup() -> None:
         _READY = True
 
 
+# Where a local cluster's evaluation worker finds the warm-up it is to start as soon as its
+# process starts (base64 of the pickled (ChunkJob, ref)); see start_early_warm_up.
+WARM_UP_ENV = "SHACC_WARM_UP"
+_EARLY: dict = {}  # "job": (job, thread, outcome) of the warm-up started with the process
+
+
+def warm_up_env(job: ChunkJob, ref, limit: int = 64 * 1024) -> dict[str, str]:
+    """The environment that has a local evaluation worker start ``warm_up(job, ref)``
+    when its process starts; empty when the job is too large for a variable."""
+    blob = base64.b64encode(pickle.dumps((job, ref))).decode()
+    return {WARM_UP_ENV: blob} if len(blob) <= limit else {}
+
+
+def start_early_warm_up(blob: str) -> None:
+    """Run the warm-up named by ``blob`` (:func:`warm_up_env`) in a thread of this
+    process, now: JAX's start, the accelerator's and the program's loading (or
+    compilation) then overlap the start of the other workers, instead of beginning
+    when the sweep's first task arrives. The :func:`warm_up` task of the same job waits
+    for it and reports its result."""
+    job, ref = pickle.loads(base64.b64decode(blob))
+    outcome: dict = {}
+
+    def run() -> None:
+        try:
+            outcome["result"] = _warm_up(job, ref)
+        except BaseException as e:  # the task reruns the warm-up and raises it there
+            outcome["error"] = e
+
+    thread = threading.Thread(target=run, name="shacc-warm-up", daemon=True)
+    _EARLY["job"] = (job, thread, outcome)
+    thread.start()
+
+
 def warm_up(job: ChunkJob, ref) -> dict:
     """Compile (or load) the program of ``job``'s chunks while their scenes are still
     being precomputed: one scene (``ref``: a Scene or ``random_scene``'s arguments) is
     precomputed here, outside any cache, and evaluated, padded to the chunk's shapes.
-    Returns the seconds it took and the programs it compiled and loaded."""
+    Returns the seconds it took, the programs it compiled and loaded, and whether it
+    had started with the worker's process (:func:`start_early_warm_up`)."""
+    early = _EARLY.pop("job", None)
+    if early is not None and early[0] == job:
+        _, thread, outcome = early
+        thread.join()
+        if "result" in outcome:
+            return {**outcome["result"], "early": True}
+    return {**_warm_up(job, ref), "early": False}
+
+
+def _warm_up(job: ChunkJob, ref) -> dict:
     from geometry_precompute import precompute, random_scene
     from geometry_precompute.scene import Scene
 

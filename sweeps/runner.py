@@ -127,6 +127,12 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
     that may be precomputed ahead of the evaluation."""
     check_output_dir(out, "--out", SWEEP_FILES)
+    if not (scheduler or cfg.scheduler):
+        # The local cluster's fork server imports the workers' modules while this
+        # process reads the config, plans and imports distributed.
+        from .cluster import start_fork_server
+
+        start_fork_server()
     if cache is not None:
         check_output_dir(cache, "--cache", ("*",))
         cache.mkdir(parents=True, exist_ok=True)
@@ -211,10 +217,13 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         return summary
     files = cfg.scenes() if cfg.source["kind"] == "files" else None
     from .cluster import connect
+    from .evaluation_worker import warm_up_env
 
     # When each phase ended, in seconds since the start (the client's wall clock).
     phases = {"config": time.perf_counter() - t0}
-    with connect(scheduler, workers) as pool:
+    # A local cluster's evaluation workers start the warm-up with their processes.
+    with connect(scheduler, workers, warm_up=warm_up_env(*_warm_up_job(cfg, todo, files))) \
+            as pool:
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
@@ -229,6 +238,17 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
     summary["phases"] = {k: round(v, 3) for k, v in phases.items()}
     summary["seconds"] = round(time.perf_counter() - t0, 3)
     return summary
+
+
+def _warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
+    """(job, scene) of ``evaluation_worker.warm_up``: the first chunk's job and its first
+    scene (a Scene, or ``random_scene``'s arguments)."""
+    from .evaluation_worker import ChunkJob
+
+    c = todo[0]
+    job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shapes(cfg),
+                   _setting_names(cfg))
+    return job, files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
 
 
 def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
@@ -257,7 +277,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     busy = dict.fromkeys(("precompute", "warm_up", "join", "evaluate", "tables", "write"),
                          0.0)
     totals = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
-              "compilations": 0, "programs_loaded": 0}
+              "compilations": 0, "programs_loaded": 0, "warmed_up_with_the_process": 0}
     bar_opts = {"disable": None if progress else True, "file": sys.stderr, "smoothing": 0.1}
     scenes_bar = tqdm(total=sum(len(c.scenes) for c in todo), unit="scene",
                       desc="precompute", **bar_opts)
@@ -302,10 +322,9 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
 
     def warm_up() -> None:
         """Each evaluation worker compiles (or loads) the first chunk's program while the
-        scenes are being precomputed."""
-        c = todo[0]
-        job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shp, names)
-        ref = files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
+        scenes are being precomputed (a local cluster's workers began it with their
+        processes: the task then waits for that warm-up to end)."""
+        job, ref = _warm_up_job(cfg, todo, files)
         # One per evaluation worker: each takes one, holding its single evaluate slot.
         # (Not pinned with workers=[...]: distributed 2026.8's scheduler fails with a
         # KeyError when a pinned task with resources is moved off a dead worker.)
@@ -326,6 +345,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
                 busy["warm_up"] += w["seconds"]
                 totals["compilations"] += w["compiled"]
                 totals["programs_loaded"] += w["loaded"]
+                totals["warmed_up_with_the_process"] += w["early"]
                 warming.discard(fut.key)
                 continue
             if fut.key in batch_size:  # a precompute task: count it, leave its result

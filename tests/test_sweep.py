@@ -97,6 +97,8 @@ def finished(tmp_path_factory):
 def test_tables_and_values(finished):
     cfg, out, _, summary = finished
     assert summary["status"] == "complete" and summary["precomputed"] == 3
+    # The local cluster's evaluation worker began its warm-up with its process.
+    assert summary["warmed_up_with_the_process"] == 1
     # The two points differ only in v_max (a rollout setting): one group, evaluated with a
     # points axis, so 3 chunks of one scene each, not 6.
     assert summary["chunks"] == 3
@@ -322,6 +324,7 @@ def test_started_cluster_gives_the_embedded_tables(started_cluster, tmp_path, fi
     assert s["scheduler"] == started_cluster and s["status"] == "complete"
     assert s["precompute_workers"] == 1 and s["evaluation_workers"] == 1
     assert s["precomputed"] == 3 and s["compilations"] + s["programs_loaded"] > 0
+    assert s["warmed_up_with_the_process"] == 0  # a cluster started apart: the task's
     assert_same_tables(apart, finished[1])
 
 

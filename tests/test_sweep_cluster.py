@@ -15,6 +15,7 @@ import pytest
 from test_sweep import CONFIG, write
 
 from geometry_precompute import InputError, bake, precompute, random_scene
+from sweeps import evaluation_worker
 from sweeps.config import load_config, parse_config
 from sweeps.plan import bucket, plan, shapes
 
@@ -132,3 +133,49 @@ print(json.dumps({"peak": tracemalloc.get_traced_memory()[1], "written": size}))
     extra = peaks[12]["written"] - peaks[3]["written"]
     assert extra > 800_000  # what holding every chunk would add, at least
     assert grown < 0.25 * extra, (peaks, grown, extra)
+
+
+def test_warm_up_begun_with_the_process_serves_the_task(tmp_path):
+    """What an evaluation worker of a local cluster does: the warm-up passed in its
+    environment starts in a thread, and the warm-up task of the same job waits for it
+    and reports it (``early``). A task of another job runs its own; an early warm-up
+    that failed is run again by the task, which raises the error."""
+    from dataclasses import replace
+
+    from sweeps.runner import _warm_up_job
+
+    cfg = load_config(write(tmp_path, CONFIG))
+    job, ref = _warm_up_job(cfg, plan(cfg), None)
+    blob = evaluation_worker.warm_up_env(job, ref)[evaluation_worker.WARM_UP_ENV]
+    evaluation_worker.start_early_warm_up(blob)
+    got = evaluation_worker.warm_up(job, ref)
+    assert got["early"] is True and got["seconds"] > 0
+    assert got["compiled"] + got["loaded"] >= 1
+    evaluation_worker.start_early_warm_up(blob)
+    other = evaluation_worker.warm_up(replace(job, modes=("baseline",)), ref)
+    assert other["early"] is False
+    bad = (ref[0], "bogus", *ref[2:])  # random_scene refuses this sampling kind
+    evaluation_worker.start_early_warm_up(evaluation_worker.warm_up_env(job, bad)[
+        evaluation_worker.WARM_UP_ENV])
+    with pytest.raises(ValueError, match="sampling kind"):
+        evaluation_worker.warm_up(job, bad)
+    assert evaluation_worker.warm_up_env(job, ref, limit=16) == {}  # too large: none
+
+
+def test_local_workers_are_forked_from_one_server():
+    """The local cluster's workers are forked from one fork server, which imported the
+    task modules before any task ran; none of them has JAX before its first task (the
+    evaluation worker's warm-up brings it), and the server is not this process."""
+    from sweeps.cluster import connect
+
+    def probe():
+        return os.getppid(), "sweeps.workers" in sys.modules, "jax" in sys.modules
+
+    with connect(workers=1) as pool:
+        found = pool.client.run(probe)
+    parents = {p for p, _, _ in found.values()}
+    assert len(found) == 2 and len(parents) == 1 and os.getpid() not in parents
+    server = open(f"/proc/{parents.pop()}/cmdline", "rb").read()
+    assert b"multiprocessing.forkserver" in server
+    assert all(imported for _, imported, _ in found.values())
+    assert not any(jax for _, _, jax in found.values())

@@ -1,0 +1,96 @@
+"""Where a sweep's wall time goes: one ``shacc sweep`` run with Dask's task stream
+recorded, printed as a timeline in seconds since the command's start.
+
+    python benchmarks/bench_timeline.py CONFIG --out DIR [--cache C] [--workers N]
+        [--scheduler ADDRESS]
+
+For each kind of task (precompute, warm-up, evaluate, encode): when the first one
+started, when the last one ended, and their busy time summed over workers; the
+evaluations chunk by chunk; when the worker processes were started and ready; and the
+summary's phases. Run it twice with the same ``--cache`` (into new folders) to see a
+warm sweep.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import time
+from collections import defaultdict
+from pathlib import Path
+
+T0 = time.time()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("config")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--cache")
+    ap.add_argument("--workers", type=int)
+    ap.add_argument("--scheduler")
+    args = ap.parse_args()
+    if not args.scheduler:  # first thing, as ``shacc sweep`` does
+        from sweeps.cluster import start_fork_server
+
+        start_fork_server()
+    from distributed import get_task_stream
+
+    from sweeps import cluster
+    from sweeps.config import load_config
+    from sweeps.runner import run_sweep
+
+    seen: dict = {}
+    connect = cluster.connect
+
+    @contextlib.contextmanager
+    def recorded(*a, **k):
+        with connect(*a, **k) as pool:
+            seen["ready"] = time.time()
+            seen["workers"] = pool.client.run(_process_times)
+            with get_task_stream(pool.client) as ts:
+                yield pool
+            seen["tasks"] = ts.data
+
+    cluster.connect = recorded
+    summary = run_sweep(load_config(args.config), Path(args.out),
+                        Path(args.cache) if args.cache else None, args.workers,
+                        progress=False, scheduler=args.scheduler)
+    end = time.time()
+    print(json.dumps(summary))
+    _report(seen, end)
+
+
+def _process_times() -> dict:
+    import psutil
+
+    return {"created": psutil.Process().create_time(), "imported": time.time()}
+
+
+def _report(seen: dict, end: float) -> None:
+    def t(x: float) -> str:
+        return f"{x - T0:7.3f}"
+
+    created = [w["created"] for w in seen["workers"].values()]
+    print(f"worker processes created {t(min(created))} .. {t(max(created))}; "
+          f"all ready {t(seen['ready'])}; command ended {t(end)}")
+    kinds: dict[str, list] = defaultdict(list)
+    for task in seen["tasks"]:
+        kind = task["key"].split("-")[0] if not task["key"].startswith("warm-up") \
+            else "warm-up"
+        for ss in task["startstops"]:
+            if ss["action"] == "compute":
+                kinds[kind].append((ss["start"], ss["stop"], task["key"]))
+    for kind, spans in sorted(kinds.items(), key=lambda kv: min(s for s, _, _ in kv[1])):
+        busy = sum(b - a for a, b, _ in spans)
+        print(f"{kind:>10}: {len(spans):4d} tasks, first start {t(min(a for a, _, _ in spans))}, "
+              f"last end {t(max(b for _, b, _ in spans))}, busy {busy:7.3f} s")
+    for a, b, key in sorted(kinds.get("evaluate", [])):
+        print(f"  {key.rsplit('-', 1)[-1]:>4}: evaluate {t(a)} .. {t(b)} ({b - a:.3f} s)")
+    for a, b, _ in sorted(kinds.get("warm-up", [])):
+        print(f"  warm-up {t(a)} .. {t(b)} ({b - a:.3f} s)")
+
+
+if __name__ == "__main__":
+    main()
