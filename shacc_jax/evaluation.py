@@ -350,9 +350,11 @@ def evaluate_cached(geometry: Geometry, params: Params, layout: Layout) -> Evalu
 
 
 def _host(tree):
+    """A pytree of device arrays as NumPy arrays: every copy to the host is started
+    before the first is waited for (``jax.device_get``), not one after another."""
     import numpy as np
 
-    return jax.tree.map(np.asarray, tree)
+    return jax.tree.map(np.asarray, jax.device_get(tree))
 
 
 def _pad_scenes(geometry: Geometry, params: Params, parts: int):

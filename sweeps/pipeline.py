@@ -35,7 +35,13 @@ class Evaluated:
 
 
 def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) -> Evaluation:
-    """One evaluation whose mode axis (1) is ``modes``, from mode -> (evaluation, index)."""
+    """One evaluation whose mode axis (1) is ``modes``, from mode -> (evaluation, index).
+    When one evaluation already holds the modes in that order, it is that evaluation
+    (no copy)."""
+    ev0 = parts[modes[0]][0]
+    if all(parts[m][0] is ev0 and parts[m][1] == i for i, m in enumerate(modes)) and \
+            np.shape(ev0.rollouts.outcome)[1] == len(modes):
+        return ev0
     def pick(get):
         return np.concatenate([np.asarray(get(parts[m][0]))[:, parts[m][1]:parts[m][1] + 1]
                                for m in modes], axis=1)

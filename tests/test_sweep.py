@@ -363,3 +363,27 @@ def test_sweep_over_collision_and_gripper_sizes(tmp_path):
     assert by[("off", 0.04)] == 0 and by[("off", 0.14)] == 0
     assert by[("mjx", 0.04)] > 0 and by[("mjx", 0.14)] > 0
     assert by[("mjx", 0.04)] != by[("mjx", 0.14)]
+
+
+def test_modes_of_one_evaluation_are_joined_without_a_copy(shipped_bake):
+    """``pipeline._join_modes``: modes that one evaluation holds in the asked order come
+    back as that evaluation (no copy); in another order, or from several evaluations,
+    each mode's column is taken from where it was evaluated."""
+    import jax
+
+    import shacc_jax
+    from sweeps.pipeline import _join_modes
+
+    modes = shacc_jax.MODES
+    ev = jax.device_get(shacc_jax.evaluate(*shacc_jax.inputs(shipped_bake, modes)))
+    parts = {m: (ev, i) for i, m in enumerate(modes)}
+    assert _join_modes(parts, modes) is ev
+    backwards = _join_modes(parts, modes[::-1])
+    for got, want in zip([*backwards.rollouts, *backwards.metrics],
+                         [*ev.rollouts, *ev.metrics], strict=True):
+        np.testing.assert_array_equal(got, np.asarray(want)[:, ::-1])
+    one = jax.device_get(shacc_jax.evaluate(*shacc_jax.inputs(shipped_bake, ("shacc",))))
+    mixed = _join_modes({"baseline": (ev, 0), "shacc": (one, 0)}, ("baseline", "shacc"))
+    assert mixed is not ev
+    np.testing.assert_array_equal(mixed.rollouts.outcome[:, 1], one.rollouts.outcome[:, 0])
+    np.testing.assert_array_equal(mixed.rollouts.outcome[:, 0], ev.rollouts.outcome[:, 0])
