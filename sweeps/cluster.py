@@ -125,15 +125,19 @@ def start_fork_server() -> bool:
     import multiprocessing
     import multiprocessing.forkserver
 
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return False
     import dask
 
-    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
     for k, v in PRE_SPAWN.items():
         os.environ.setdefault(k, v)
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORK_PRELOAD))
-    multiprocessing.forkserver.ensure_running()
+    try:
+        multiprocessing.forkserver.ensure_running()
+    except OSError:  # no Unix socket or no process to be had: spawn, as distributed does
+        dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
+        return False
+    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
     return True
 
 

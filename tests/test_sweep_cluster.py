@@ -179,3 +179,20 @@ def test_local_workers_are_forked_from_one_server():
     assert b"multiprocessing.forkserver" in server
     assert all(imported for _, imported, _ in found.values())
     assert not any(jax for _, _, jax in found.values())
+
+
+def test_no_fork_server_means_spawned_workers(monkeypatch):
+    """Where the fork server cannot start, the local cluster spawns its workers."""
+    import multiprocessing.forkserver
+
+    import dask
+
+    from sweeps.cluster import start_fork_server
+
+    def refuse():
+        raise OSError("no unix sockets here")
+
+    monkeypatch.setattr(multiprocessing.forkserver, "ensure_running", refuse)
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        assert start_fork_server() is False
+        assert dask.config.get("distributed.worker.multiprocessing-method") == "spawn"
