@@ -100,7 +100,6 @@ def dask_setup(worker) -> None:
             start_early_warm_up(os.environ[WARM_UP_ENV])
 
 
-
 # What every local worker imports, loaded once in the fork server (below) rather than by
 # each new interpreter. Kept to what is light: the server imports one module after
 # another, and a long list (pandas, pyarrow, scipy, the mesh libraries) made the workers

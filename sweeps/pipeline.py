@@ -42,6 +42,7 @@ def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) 
     if all(parts[m][0] is ev0 and parts[m][1] == i for i, m in enumerate(modes)) and \
             np.shape(ev0.rollouts.outcome)[1] == len(modes):
         return ev0
+
     def pick(get):
         return np.concatenate([np.asarray(get(parts[m][0]))[:, parts[m][1]:parts[m][1] + 1]
                                for m in modes], axis=1)
