@@ -24,6 +24,7 @@ from geometry_precompute.schema import ALL_MODES
 from geometry_precompute.schema import MODES as PAPER
 
 from . import compile_cache
+from .cluster import ClusterLost
 
 # The modes a command may be asked for (the schema's, read without importing JAX);
 # `evaluate` runs the paper's three unless asked: the optimized mode searches first.
@@ -199,6 +200,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except ClusterLost as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         # Worker processes ignore SIGINT (sweeps.workers) and end with their pool.
         print("interrupted", file=sys.stderr)

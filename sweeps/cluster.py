@@ -60,6 +60,24 @@ class Pool:
         return getattr(self.client, "dashboard_link", None)
 
 
+class ClusterLost(RuntimeError):
+    """The sweep's Dask scheduler went away while the sweep ran (killed, its host down,
+    the network cut). What was written stays; the same command resumes from there."""
+
+
+def lost_scheduler(client, error: BaseException) -> bool:
+    """Whether ``error``, raised while a sweep waited on its tasks, means that the
+    connection to the scheduler is gone (not a task's own error, nor the disk's)."""
+    from concurrent.futures import CancelledError
+
+    from distributed.comm.core import CommClosedError
+
+    if isinstance(error, CommClosedError):
+        return True
+    return isinstance(error, CancelledError | TimeoutError | OSError) and \
+        client.status != "running"
+
+
 def local_gpus() -> list[str]:
     """This host's GPUs, as CUDA_VISIBLE_DEVICES values: those that variable lists when
     set, else those ``nvidia-smi -L`` lists; none when JAX_PLATFORMS asks for the CPU."""
@@ -183,6 +201,9 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     from distributed import Client
 
     logging.getLogger("distributed").setLevel(logging.ERROR)
+    # Its failed reconnections, with tracebacks, when the scheduler is gone: the command
+    # says that in one line (ClusterLost).
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
     cluster = None
     with warnings.catch_warnings():
         # distributed warns when a port is taken (it picks another) or bokeh is missing.

@@ -216,7 +216,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         summary["status"] = "nothing to do: the sweep is complete"
         return summary
     files = cfg.scenes() if cfg.source["kind"] == "files" else None
-    from .cluster import connect
+    from .cluster import ClusterLost, connect, lost_scheduler
     from .evaluation_worker import warm_up_env
 
     # When each phase ended, in seconds since the start (the client's wall clock).
@@ -227,7 +227,16 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
-        counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
+        try:
+            counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
+        except Exception as e:
+            if not lost_scheduler(pool.client, e):
+                raise
+            written = sum(tables.part_path(out, "scenes", c.index).exists() for c in chunks)
+            where = f"at {scheduler}" if scheduler else "of the local cluster"
+            raise ClusterLost(f"lost the Dask scheduler {where} ({type(e).__name__}: {e}); "
+                              f"{written} of {len(chunks)} chunks are written in {out}: run "
+                              "the same command again to go on from there") from None
         phases["stream"] = time.perf_counter() - t0
         summary.update(counts)
         summary.update({"precompute_workers": pool.precompute_threads,

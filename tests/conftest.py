@@ -91,35 +91,49 @@ def count_compiles(caplog):
     return counting
 
 
-@pytest.fixture
-def started_cluster(tmp_path):
-    """A scheduler and two workers started apart, as on other hosts: one takes the
-    precompute, one the evaluation. All stopped afterwards."""
-    sched_file = tmp_path / "scheduler.json"
-    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    dask = [sys.executable, "-m", "dask"]
-    procs = [subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", str(sched_file)],
-                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)]
-    try:
-        deadline = time.time() + 60
-        while not sched_file.exists() and time.time() < deadline:
-            time.sleep(0.1)
-        address = json.loads(sched_file.read_text())["address"]
-        for resource in ("precompute=1", "evaluate=1"):
-            procs.append(subprocess.Popen(
-                [*dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
-                 "--nworkers", "1", "--resources", resource, "--no-dashboard"],
-                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                start_new_session=True))
-        yield address
-    finally:
-        for p in procs:
-            with_group = [p.pid, *process_group_members(p.pid)]
-            for pid in with_group:
+class StartedCluster:
+    """A Dask scheduler and two workers started apart, as on other hosts (one takes the
+    precompute, one the evaluation), on 127.0.0.1; :meth:`stop` kills them all."""
+
+    def __init__(self, folder: Path):
+        sched_file = folder / "scheduler.json"
+        env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+        dask = [sys.executable, "-m", "dask"]
+        self.scheduler = subprocess.Popen(
+            [*dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+             "--scheduler-file", str(sched_file)], env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, start_new_session=True)
+        self.procs = [self.scheduler]
+        try:
+            deadline = time.time() + 60
+            while not sched_file.exists() and time.time() < deadline:
+                time.sleep(0.1)
+            self.address = json.loads(sched_file.read_text())["address"]
+            for resource in ("precompute=1", "evaluate=1"):
+                self.procs.append(subprocess.Popen(
+                    [*dask, "worker", self.address, "--host", "127.0.0.1", "--nthreads", "1",
+                     "--nworkers", "1", "--resources", resource, "--no-dashboard"],
+                    env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                    start_new_session=True))
+        except BaseException:
+            self.stop()
+            raise
+
+    def stop(self) -> None:
+        for p in self.procs:
+            for pid in [p.pid, *process_group_members(p.pid)]:
                 try:
                     os.kill(pid, signal.SIGKILL)
                 except ProcessLookupError:
                     pass
             p.wait()
+
+
+@pytest.fixture
+def started_cluster(tmp_path):
+    """The address of a :class:`StartedCluster`, stopped afterwards."""
+    cluster = StartedCluster(tmp_path)
+    try:
+        yield cluster.address
+    finally:
+        cluster.stop()

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import process_group_members
+from conftest import StartedCluster, process_group_members
 
 from geometry_precompute import InputError, bake, precompute, random_scene
 from sweeps.config import load_config, parse_config
@@ -219,6 +219,12 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout.strip().splitlines()[-1])
     assert summary["done_before"] == len(done) and summary["status"] == "complete"
+    _assert_twelve_scenes(out, ref_out)
+
+
+def _assert_twelve_scenes(out: Path, ref_out: Path) -> None:
+    """``out`` holds a 12-scene sweep of CONFIG's seeds: every row once, and the rows of
+    its first three scenes equal the 3-scene reference sweep's."""
     keys = {"scenes": ["point", "scene_index"],
             "rollouts": ["point", "scene_index", "mode", "start", "task"]}
     for name, key in keys.items():
@@ -228,6 +234,48 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
         pd.testing.assert_frame_equal(first_rows,
                                       want.sort_values(key).reset_index(drop=True))
     assert not list(out.rglob("*.tmp"))
+
+
+def test_lost_scheduler_ends_the_sweep_in_one_line_and_the_rerun_goes_on(tmp_path, finished):
+    """SPEC section 12, the scheduler killed: a 12-chunk sweep on a cluster started apart
+    loses its scheduler (SIGKILL) after its first chunk. The command ends at once, with
+    one line (exit 1; how many chunks are written; no traceback) and whole parts. Run
+    again on another cluster, it goes on from there: every row once, and the reference
+    sweep's rows equal."""
+    _, ref_out, _, _ = finished
+    config = write(tmp_path, CONFIG.replace("count = 3", "count = 12"))
+    out, cache = tmp_path / "lost", tmp_path / "cache"
+    for name in ("first", "second"):
+        (tmp_path / name).mkdir()
+    first = StartedCluster(tmp_path / "first")
+    try:
+        proc = subprocess.Popen([*_sweep_cmd(config, out, cache), "--scheduler", first.address],
+                                env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        part = out / "scenes" / "part-000000.parquet"
+        deadline = time.time() + 300
+        while not part.exists() and proc.poll() is None and time.time() < deadline:
+            time.sleep(0.005)
+        assert part.exists(), "the sweep wrote no chunk"
+        first.scheduler.kill()
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        first.stop()
+    done = sorted((out / "scenes").glob("part-*.parquet"))
+    assert 1 <= len(done) < 12, "the sweep ended before its scheduler was killed"
+    assert proc.returncode == 1 and "Traceback" not in stderr, stderr[-3000:]
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: lost the Dask scheduler at {first.address}"), last
+    assert f"{len(done)} of 12 chunks are written" in last and "run the same command" in last
+    second = StartedCluster(tmp_path / "second")
+    try:
+        summary = _summary(subprocess.run(
+            [*_sweep_cmd(config, out, cache), "--scheduler", second.address], env=_env(),
+            capture_output=True, text=True, timeout=600))
+    finally:
+        second.stop()
+    assert summary["done_before"] == len(done) and summary["status"] == "complete"
+    _assert_twelve_scenes(out, ref_out)
 
 
 def test_evaluation_spread_over_two_cpu_devices(shipped_bake, tmp_path):
