@@ -32,8 +32,9 @@ def main() -> None:
     ap.add_argument("--scheduler")
     args = ap.parse_args()
     if not args.scheduler:  # first thing, as ``shacc sweep`` does
-        from sweeps.cluster import start_fork_server
+        from sweeps.cluster import start_fork_server, start_scheduler_process
 
+        start_scheduler_process()
         start_fork_server()
     from distributed import get_task_stream
 
@@ -63,9 +64,15 @@ def main() -> None:
 
 
 def _process_times() -> dict:
-    import psutil
+    """When this process was created, on the wall clock, to 10 ms: its start in clock
+    ticks since boot (/proc/self/stat) against the seconds since boot now
+    (/proc/uptime). (psutil's create_time adds the boot time in whole seconds, so it
+    read up to 1 s early.)"""
+    import os
 
-    return {"created": psutil.Process().create_time(), "imported": time.time()}
+    now, uptime = time.time(), float(Path("/proc/uptime").read_text().split()[0])
+    ticks = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19])
+    return {"created": now - uptime + ticks / os.sysconf("SC_CLK_TCK"), "imported": now}
 
 
 def _report(seen: dict, end: float) -> None:

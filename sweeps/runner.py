@@ -234,7 +234,8 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
                 raise
             written = sum(tables.part_path(out, "scenes", c.index).exists() for c in chunks)
             where = f"at {scheduler}" if scheduler else "of the local cluster"
-            raise ClusterLost(f"lost the Dask scheduler {where} ({type(e).__name__}: {e}); "
+            why = " ".join(f"{type(e).__name__}: {e}".split())  # on one line
+            raise ClusterLost(f"lost the Dask scheduler {where} ({why}); "
                               f"{written} of {len(chunks)} chunks are written in {out}: run "
                               "the same command again to go on from there") from None
         phases["stream"] = time.perf_counter() - t0

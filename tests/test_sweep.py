@@ -266,7 +266,8 @@ def test_lost_scheduler_ends_the_sweep_in_one_line_and_the_rerun_goes_on(tmp_pat
     assert proc.returncode == 1 and "Traceback" not in stderr, stderr[-3000:]
     last = stderr.strip().splitlines()[-1]
     assert last.startswith(f"error: lost the Dask scheduler at {first.address}"), last
-    assert f"{len(done)} of 12 chunks are written" in last and "run the same command" in last
+    assert f"{len(done)} of 12 chunks are written" in last and "run the same command" in last, \
+        (last, [p.name for p in done])
     second = StartedCluster(tmp_path / "second")
     try:
         summary = _summary(subprocess.run(
