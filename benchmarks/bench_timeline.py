@@ -32,9 +32,8 @@ def main() -> None:
     ap.add_argument("--scheduler")
     args = ap.parse_args()
     if not args.scheduler:  # first thing, as ``shacc sweep`` does
-        from sweeps.cluster import start_fork_server, start_scheduler_process
+        from sweeps.cluster import start_fork_server
 
-        start_scheduler_process()
         start_fork_server()
     from distributed import get_task_stream
 

@@ -24,7 +24,7 @@ from geometry_precompute.schema import ALL_MODES
 from geometry_precompute.schema import MODES as PAPER
 
 from . import compile_cache
-from .cluster import ClusterError
+from .cluster import ClusterLost
 
 # The modes a command may be asked for (the schema's, read without importing JAX);
 # `evaluate` runs the paper's three unless asked: the optimized mode searches first.
@@ -187,13 +187,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
         compile_cache.enable()
     if args.command == "sweep" and not (args.dry_run or args.scheduler):
-        # First thing: the local cluster's scheduler starts in its process, and its fork
-        # server imports the workers' modules, while this process reads the config and
-        # imports its own (a config that names a scheduler leaves both unused; they end
-        # with this process).
-        from .cluster import start_fork_server, start_scheduler_process
+        # First thing: the local cluster's fork server imports the workers' modules while
+        # this process reads the config and imports its own (a config that names a
+        # scheduler leaves the server unused; it ends with this process).
+        from .cluster import start_fork_server
 
-        start_scheduler_process()
         start_fork_server()
     module, name = args.func.split(":")
     try:
@@ -202,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except ClusterError as e:
+    except ClusterLost as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

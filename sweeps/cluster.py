@@ -6,15 +6,13 @@ Two kinds of worker, told apart by Dask resources:
 - ``evaluate``: one per GPU, pinned to it (``CUDA_VISIBLE_DEVICES``), or one on the
   CPU where there is no GPU (``sweeps.evaluation_worker``).
 
-By default :func:`connect` starts a local cluster of both kinds and closes it when the
-sweep ends, also on Ctrl-C and on errors: the scheduler in a process of its own
-(``sweeps.scheduler_process``, started ahead by :func:`start_scheduler_process`), the
-nannies in this process's event loop, and each worker in a process of its own, forked
-from a server that has imported the workers' modules once (:func:`start_fork_server`).
-They die with this process even when it is killed with SIGKILL: the scheduler's stdin is
-a pipe from here, distributed's nanny hands each worker a pipe whose closing makes it
-exit at once, and the fork server exits when the last of them has. Each evaluation
-worker starts its warm-up (JAX,
+By default :func:`connect` starts a local cluster of both kinds in this process (the
+scheduler and the nannies run in its event loop; each worker is a process of its own,
+forked from a server that has imported the workers' modules once,
+:func:`start_fork_server`) and closes it when the sweep ends, also on Ctrl-C and on
+errors. Worker processes die with this process even when it is killed with SIGKILL:
+distributed's nanny hands each a pipe whose closing makes it exit at once, and the fork
+server exits when the last of them has. Each evaluation worker starts its warm-up (JAX,
 the accelerator, the first chunk's program) with its process
 (``evaluation_worker.start_early_warm_up``), while the other workers start.
 
@@ -32,8 +30,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -64,11 +60,7 @@ class Pool:
         return getattr(self.client, "dashboard_link", None)
 
 
-class ClusterError(RuntimeError):
-    """The cluster, not the input, failed: the command says so in one line."""
-
-
-class ClusterLost(ClusterError):
+class ClusterLost(RuntimeError):
     """The sweep's Dask scheduler went away while the sweep ran (killed, its host down,
     the network cut). What was written stays; the same command resumes from there."""
 
@@ -166,67 +158,8 @@ def start_fork_server() -> bool:
     return True
 
 
-_STARTED: list = []  # a scheduler process started ahead (start_scheduler_process)
-SCHEDULER_COMMAND = [sys.executable, "-m", "sweeps.scheduler_process"]
-
-
-def start_scheduler_process() -> None:
-    """Start the next local cluster's scheduler now, in a process of its own
-    (``sweeps.scheduler_process``), so that its start overlaps this process's imports.
-    Idempotent until a local cluster takes it. It ends with this process (its stdin is a
-    pipe from here), SIGKILL included."""
-    if not _STARTED:
-        errors = tempfile.TemporaryFile()  # read only if it fails to start
-        _STARTED.append((subprocess.Popen(
-            SCHEDULER_COMMAND, stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=errors, env={**os.environ, **QUIET}), errors))
-
-
-def _scheduler_process(timeout: float = 60.0):
-    """A SpecCluster scheduler spec whose scheduler is the process that
-    :func:`start_scheduler_process` started (one is started now if none is waiting):
-    distributed's ProcessInterface, whose ``start`` reads the address and ``close`` ends
-    the process."""
-    import asyncio
-    import json
-
-    from distributed.deploy.spec import ProcessInterface
-
-    start_scheduler_process()
-    process, errors = _STARTED.pop()
-
-    class SchedulerProcess(ProcessInterface):
-        async def start(self) -> None:
-            try:
-                line = await asyncio.wait_for(asyncio.to_thread(process.stdout.readline),
-                                              timeout)
-            except TimeoutError:
-                line = b""
-            if not line:
-                process.kill()
-                process.wait()
-                errors.seek(0)
-                err = errors.read().decode(errors="replace").strip()
-                raise ClusterError("the local Dask scheduler did not start"
-                                   + (f": {err.splitlines()[-1]}" if err else ""))
-            self.address = json.loads(line)["address"]
-            await super().start()
-
-        async def close(self) -> None:
-            try:  # the cluster has told it to terminate: it ends by itself
-                await asyncio.wait_for(asyncio.to_thread(process.wait), 5)
-            except TimeoutError:
-                process.kill()
-                process.wait()
-            for f in (process.stdin, process.stdout, errors):
-                f.close()
-            await super().close()
-
-    return {"cls": SchedulerProcess, "options": {}}
-
-
 def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
-    from distributed import Nanny, SpecCluster
+    from distributed import Nanny, Scheduler, SpecCluster
 
     start_fork_server()
     n_cpu = workers or os.cpu_count() or 1
@@ -250,7 +183,7 @@ def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
         spec[f"evaluate-{i}"] = {"cls": Nanny, "options": {
             **base, "resources": {EVALUATE: 1}, "memory_limit": 0,
             "env": {**here, **env, **warm_up}}}
-    scheduler = _scheduler_process()
+    scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0"}}
     cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.CRITICAL,
                           name="shacc-sweep")
     return cluster, n_cpu, len(evals)
@@ -276,12 +209,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
         # distributed warns when a port is taken (it picks another) or bokeh is missing.
         warnings.simplefilter("ignore")
         if scheduler is None:
-            try:
-                cluster, n_cpu, n_eval = _local(workers, warm_up or {})
-            except RuntimeError as e:  # SpecCluster's "Cluster failed to start: ..."
-                if isinstance(e.__cause__, ClusterError):
-                    raise e.__cause__ from None
-                raise
+            cluster, n_cpu, n_eval = _local(workers, warm_up or {})
             client = Client(cluster)
         else:
             try:

@@ -196,39 +196,3 @@ def test_no_fork_server_means_spawned_workers(monkeypatch):
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         assert start_fork_server() is False
         assert dask.config.get("distributed.worker.multiprocessing-method") == "spawn"
-
-
-def test_local_scheduler_is_a_process_of_its_own_that_ends_with_the_cluster():
-    """The local cluster's scheduler runs in a child process of the command (started
-    ahead by ``shacc sweep``, so that its start overlaps the command's imports), and
-    closing the cluster ends it."""
-    import psutil
-
-    from sweeps.cluster import connect
-
-    with connect(workers=1) as pool:
-        pid = pool.client.run_on_scheduler(os.getpid)
-        assert pid != os.getpid() and psutil.Process(pid).ppid() == os.getpid()
-        assert b"sweeps.scheduler_process" in open(f"/proc/{pid}/cmdline", "rb").read()
-    assert not psutil.pid_exists(pid)
-
-
-def test_scheduler_that_cannot_start_is_one_clear_error(monkeypatch):
-    """A local scheduler that fails to start ends the command with its reason, not a
-    traceback from distributed, and leaves no worker."""
-    import sweeps.cluster as cluster
-
-    monkeypatch.setattr(cluster, "SCHEDULER_COMMAND",
-                        [sys.executable, "-c", "import sys; sys.exit('no port to be had')"])
-    before = set(_children())
-    with pytest.raises(cluster.ClusterError, match="did not start: no port to be had"):
-        with cluster.connect(workers=1):
-            pass
-    assert set(_children()) <= before
-
-
-def _children() -> list[int]:
-    import psutil
-
-    return [p.pid for p in psutil.Process().children(recursive=True)
-            if "forkserver" not in " ".join(p.cmdline())]
