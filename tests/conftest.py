@@ -106,9 +106,14 @@ class StartedCluster:
         self.procs = [self.scheduler]
         try:
             deadline = time.time() + 60
-            while not sched_file.exists() and time.time() < deadline:
-                time.sleep(0.1)
-            self.address = json.loads(sched_file.read_text())["address"]
+            while True:  # the file may exist before it is whole
+                try:
+                    self.address = json.loads(sched_file.read_text())["address"]
+                    break
+                except (OSError, ValueError, KeyError):
+                    if time.time() > deadline:
+                        raise
+                    time.sleep(0.1)
             for resource in ("precompute=1", "evaluate=1"):
                 self.procs.append(subprocess.Popen(
                     [*dask, "worker", self.address, "--host", "127.0.0.1", "--nthreads", "1",
