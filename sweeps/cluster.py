@@ -78,6 +78,56 @@ def lost_scheduler(client, error: BaseException) -> bool:
         client.status != "running"
 
 
+# Seconds without any worker for a kind of task the sweep needs before the command says
+# so, and how often it looks (a cluster started apart: local workers are replaced).
+NO_WORKER_PATIENCE = 30.0
+NO_WORKER_CHECK = 2.0
+
+
+@contextlib.contextmanager
+def watch_workers(pool: Pool, where: str, say) -> Iterator[None]:
+    """While the block runs, look every :data:`NO_WORKER_CHECK` s whether some worker of
+    the cluster at ``where`` offers each resource the sweep's tasks ask for. When one has
+    been missing for :data:`NO_WORKER_PATIENCE` s (its only GPU host went down, say),
+    ``say`` one line, once per absence: the tasks wait for such a worker, which Dask
+    gives them as soon as one joins, and without the line a stalled bar is all a user
+    would see."""
+    import threading
+    import time
+
+    kinds = [k for k, r in ((PRECOMPUTE, pool.precompute), (EVALUATE, pool.evaluate)) if r]
+    stop = threading.Event()
+
+    def run() -> None:
+        missing: dict[str, list] = {}  # kind -> [since, said]
+        while not stop.wait(NO_WORKER_CHECK):
+            try:
+                workers = pool.client.scheduler_info(n_workers=-1)["workers"].values()
+            except Exception:  # the scheduler is gone: the sweep says so itself
+                return
+            have = {k for w in workers for k, v in (w.get("resources") or {}).items() if v}
+            now = time.monotonic()
+            for kind in kinds:
+                if kind in have:
+                    missing.pop(kind, None)
+                    continue
+                since = missing.setdefault(kind, [now, False])
+                if not since[1] and now - since[0] >= NO_WORKER_PATIENCE:
+                    since[1] = True
+                    say(f"waiting: no worker of the cluster at {where} has the {kind!r} "
+                        f"resource (for {now - since[0]:.0f} s); the sweep goes on when one "
+                        f"joins (dask worker {where} --resources {kind}=1); stopped, it "
+                        "keeps the chunks written")
+
+    watcher = threading.Thread(target=run, name="shacc-worker-watch", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        watcher.join()
+
+
 def local_gpus() -> list[str]:
     """This host's GPUs, as CUDA_VISIBLE_DEVICES values: those that variable lists when
     set, else those ``nvidia-smi -L`` lists; none when JAX_PLATFORMS asks for the CPU."""

@@ -216,7 +216,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         summary["status"] = "nothing to do: the sweep is complete"
         return summary
     files = cfg.scenes() if cfg.source["kind"] == "files" else None
-    from .cluster import ClusterLost, connect, lost_scheduler
+    from .cluster import ClusterLost, connect, lost_scheduler, watch_workers
     from .evaluation_worker import warm_up_env
 
     # When each phase ended, in seconds since the start (the client's wall clock).
@@ -227,8 +227,12 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
+        # A cluster started apart can lose every worker of a kind: say so, and wait.
+        watch = watch_workers(pool, scheduler, lambda line: tqdm.write(line, file=sys.stderr)) \
+            if scheduler else contextlib.nullcontext()
         try:
-            counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
+            with watch:
+                counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
         except Exception as e:
             if not lost_scheduler(pool.client, e):
                 raise

@@ -97,13 +97,12 @@ class StartedCluster:
 
     def __init__(self, folder: Path):
         sched_file = folder / "scheduler.json"
-        env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-        dask = [sys.executable, "-m", "dask"]
         self.scheduler = subprocess.Popen(
-            [*dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(sched_file)], env=env, stdout=subprocess.DEVNULL,
+            [*self._dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+             "--scheduler-file", str(sched_file)], env=self._env, stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL, start_new_session=True)
         self.procs = [self.scheduler]
+        self.workers: dict[str, subprocess.Popen] = {}  # the latest of each kind
         try:
             deadline = time.time() + 60
             while True:  # the file may exist before it is whole
@@ -114,24 +113,46 @@ class StartedCluster:
                     if time.time() > deadline:
                         raise
                     time.sleep(0.1)
-            for resource in ("precompute=1", "evaluate=1"):
-                self.procs.append(subprocess.Popen(
-                    [*dask, "worker", self.address, "--host", "127.0.0.1", "--nthreads", "1",
-                     "--nworkers", "1", "--resources", resource, "--no-dashboard"],
-                    env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                    start_new_session=True))
+            for kind in ("precompute", "evaluate"):
+                self.add_worker(kind)
         except BaseException:
             self.stop()
             raise
 
+    _dask = (sys.executable, "-m", "dask")
+
+    @property
+    def _env(self) -> dict:
+        return {**os.environ, "JAX_PLATFORMS": "cpu"}
+
+    def add_worker(self, kind: str) -> None:
+        """One more worker (with its nanny) that offers the ``kind`` resource."""
+        self.workers[kind] = subprocess.Popen(
+            [*self._dask, "worker", self.address, "--host", "127.0.0.1", "--nthreads", "1",
+             "--nworkers", "1", "--resources", f"{kind}=1", "--no-dashboard"],
+            env=self._env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True)
+        self.procs.append(self.workers[kind])
+
+    def wait_for_workers(self, n: int) -> None:
+        from distributed import Client
+
+        with Client(self.address, timeout=60) as client:
+            client.wait_for_workers(n, timeout=120)
+
+    @staticmethod
+    def kill(proc: subprocess.Popen) -> None:
+        """SIGKILL to a process and its group (a worker and its nanny)."""
+        for pid in [proc.pid, *process_group_members(proc.pid)]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        proc.wait()
+
     def stop(self) -> None:
         for p in self.procs:
-            for pid in [p.pid, *process_group_members(p.pid)]:
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            p.wait()
+            self.kill(p)
 
 
 @pytest.fixture

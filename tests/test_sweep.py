@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -252,11 +253,11 @@ def test_lost_scheduler_ends_the_sweep_in_one_line_and_the_rerun_goes_on(tmp_pat
         proc = subprocess.Popen([*_sweep_cmd(config, out, cache), "--scheduler", first.address],
                                 env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True)
-        part = out / "scenes" / "part-000000.parquet"
         deadline = time.time() + 300
-        while not part.exists() and proc.poll() is None and time.time() < deadline:
+        while not list((out / "scenes").glob("part-*.parquet")) and proc.poll() is None \
+                and time.time() < deadline:
             time.sleep(0.005)
-        assert part.exists(), "the sweep wrote no chunk"
+        assert list((out / "scenes").glob("part-*.parquet")), "the sweep wrote no chunk"
         first.scheduler.kill()
         _, stderr = proc.communicate(timeout=60)
     finally:
@@ -375,6 +376,49 @@ def test_started_cluster_gives_the_embedded_tables(started_cluster, tmp_path, fi
     assert s["precomputed"] == 3 and s["compilations"] + s["programs_loaded"] > 0
     assert s["warmed_up_with_the_process"] == 0  # a cluster started apart: the task's
     assert_same_tables(apart, finished[1])
+
+
+def test_missing_kind_of_worker_is_said_and_the_sweep_goes_on_when_one_joins(
+        tmp_path, finished, monkeypatch, capsys):
+    """A cluster started apart loses its only evaluation worker (and its nanny) as the
+    sweep starts: the command says, in one line, that no worker has the 'evaluate'
+    resource, waits, and finishes when a new one joins; the tables are whole."""
+    from sweeps import cluster
+
+    monkeypatch.setattr(cluster, "NO_WORKER_PATIENCE", 1.0)
+    monkeypatch.setattr(cluster, "NO_WORKER_CHECK", 0.2)
+    _, ref_out, _, _ = finished
+    cfg = load_config(write(tmp_path, CONFIG.replace("count = 3", "count = 12")))
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    started = StartedCluster(tmp_path)
+    started.wait_for_workers(2)  # both kinds known to the sweep when it starts
+    said: list[str] = []
+
+    def lose_and_replace() -> None:
+        deadline = time.time() + 300
+        while not list(cache.glob("*.pkl")) and time.time() < deadline:
+            time.sleep(0.005)  # the sweep has started: its first scene is precomputed
+        started.kill(started.workers["evaluate"])
+        while not said and time.time() < deadline:  # the line, then a new worker
+            time.sleep(0.1)
+            said.extend(line for line in capsys.readouterr().err.splitlines()
+                        if line.startswith("waiting: "))
+        started.add_worker("evaluate")
+
+    helper = threading.Thread(target=lose_and_replace)
+    helper.start()
+    try:
+        summary = run_sweep(cfg, out, cache, progress=False, scheduler=started.address)
+    finally:
+        helper.join()
+        started.stop()
+    said.extend(line for line in capsys.readouterr().err.splitlines()
+                if line.startswith("waiting: "))
+    assert len(said) == 1, said  # once per absence
+    assert f"at {started.address} has the 'evaluate' resource" in said[0]
+    assert f"dask worker {started.address} --resources evaluate=1" in said[0]
+    assert summary["status"] == "complete" and summary["done_before"] == 0
+    _assert_twelve_scenes(out, ref_out)
 
 
 def _session_processes(sid: int, holding: str) -> list[int]:
