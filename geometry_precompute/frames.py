@@ -18,8 +18,9 @@ def frame_from_approach(a) -> np.ndarray:
     x = normalize(u x z); y = z x x. Returns the 3x3 matrix [x y z] (columns).
 
     Written out in floats: 4 us against 70 us through np.cross and np.linalg.norm,
-    with the same results to two units in the last place (bit for bit where NumPy's
-    norm is not vectorised with AVX-512; tests/test_precompute_fast.py)."""
+    with the same results to two units in the last place (bit for bit unless OpenBLAS,
+    which np.linalg.norm's dot product runs on, picks its AVX-512 kernel for the
+    processor; tests/test_precompute_fast.py)."""
     return np.array(_frame_rows(a))
 
 
