@@ -74,8 +74,8 @@ def lost_scheduler(client, error: BaseException) -> bool:
 
     if isinstance(error, CommClosedError):
         return True
-    return isinstance(error, CancelledError | TimeoutError | OSError) and \
-        client.status != "running"
+    # (TimeoutError is an OSError.)
+    return isinstance(error, CancelledError | OSError) and client.status != "running"
 
 
 # Seconds without any worker for a kind of task the sweep needs before the command says

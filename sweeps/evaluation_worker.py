@@ -126,10 +126,10 @@ def warm_up(job: ChunkJob, ref) -> dict:
     Returns the seconds it took, the programs it compiled and loaded, and whether it
     had started with the worker's process (:func:`start_early_warm_up`)."""
     early = _EARLY.pop("job", None)
-    if early is not None and early[0] == job:
-        _, thread, outcome = early
-        thread.join()
-        if "result" in outcome:
+    if early is not None:
+        started, thread, outcome = early
+        thread.join()  # also for another job: two warm-ups at once only compete
+        if started == job and "result" in outcome:
             return {**outcome["result"], "early": True}
     return {**_warm_up(job, ref), "early": False}
 

@@ -127,12 +127,6 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
     that may be precomputed ahead of the evaluation."""
     check_output_dir(out, "--out", SWEEP_FILES)
-    if not (scheduler or cfg.scheduler):
-        # The local cluster's fork server imports the workers' modules while this
-        # process reads the config, plans and imports distributed.
-        from .cluster import start_fork_server
-
-        start_fork_server()
     if cache is not None:
         check_output_dir(cache, "--cache", ("*",))
         cache.mkdir(parents=True, exist_ok=True)
