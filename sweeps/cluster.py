@@ -233,10 +233,55 @@ def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
         spec[f"evaluate-{i}"] = {"cls": Nanny, "options": {
             **base, "resources": {EVALUATE: 1}, "memory_limit": 0,
             "env": {**here, **env, **warm_up}}}
-    scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0"}}
+    # The dashboard (bokeh) is built when it is first opened (_dashboard_on_demand).
+    scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0", "dashboard": False}}
     cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.CRITICAL,
                           name="shacc-sweep")
+    _dashboard_on_demand(cluster)
     return cluster, n_cpu, len(evals)
+
+
+def _dashboard_on_demand(cluster) -> None:
+    """Build a local cluster's dashboard (bokeh) when a page of it is first asked for.
+    Built with the scheduler, it took 1.0-1.3 s of every sweep's start on the H100
+    hosts (importing bokeh), before any worker process was started; built in a thread
+    once the workers were up, it slowed the scheduler as the sweep began
+    (benchmarks/RESULTS.md). Its address is served from the start: the first request
+    for any of its pages imports bokeh (in a thread, about a second), adds the
+    dashboard to the scheduler's web server and is redirected to the page it asked
+    for. distributed's own routes (/health, /metrics, /info, ...) are unaffected."""
+    import asyncio
+    import importlib
+
+    from tornado import web
+
+    scheduler = cluster.scheduler
+    app = scheduler.http_application  # distributed's RoutingApplication
+    building: list = []  # the build, once asked for
+
+    async def build() -> bool:
+        try:
+            dashboard = await asyncio.get_running_loop().run_in_executor(
+                None, importlib.import_module, "distributed.dashboard.scheduler")
+        except ImportError:
+            return False
+        dashboard.connect(app, scheduler.http_server, scheduler, prefix="/")
+        app.applications.remove(on_demand)  # bokeh's pages answer from now on
+        return True
+
+    class Build(web.RequestHandler):
+        async def get(self) -> None:
+            if not building:
+                building.append(asyncio.ensure_future(build()))
+            if await asyncio.shield(building[0]):
+                self.redirect(self.request.uri)
+            else:
+                self.set_status(404)
+                self.finish("The Dask dashboard needs bokeh: pip install bokeh")
+
+    # Asked only for paths that distributed's own routes do not take.
+    on_demand = web.Application([(r"/.*", Build)])
+    app.add_application(on_demand)
 
 
 @contextlib.contextmanager

@@ -181,6 +181,29 @@ def test_local_workers_are_forked_from_one_server():
     assert not any(jax for _, _, jax in found.values())
 
 
+def test_local_dashboard_is_built_when_first_opened():
+    """The local cluster's dashboard is built when a page of it is first asked for, not
+    with the scheduler: its printed address then answers with bokeh's status page, as
+    do its other pages; distributed's own routes answer before that."""
+    import urllib.request
+
+    from sweeps.cluster import connect
+
+    def bokeh_apps(pool) -> int:
+        return pool.client.run_on_scheduler(lambda dask_scheduler: sum(
+            "Bokeh" in type(a).__name__ for a in dask_scheduler.http_application.applications))
+
+    with connect(workers=1) as pool:
+        root = pool.dashboard.rsplit("/", 1)[0]
+        assert pool.dashboard.endswith("/status") and bokeh_apps(pool) == 0
+        assert urllib.request.urlopen(root + "/health", timeout=30).read() == b"ok"
+        assert bokeh_apps(pool) == 0
+        page = urllib.request.urlopen(pool.dashboard, timeout=60)
+        assert page.url == pool.dashboard and b"bokeh" in page.read().lower()
+        assert bokeh_apps(pool) == 1
+        assert b"bokeh" in urllib.request.urlopen(root + "/workers", timeout=30).read().lower()
+
+
 def test_no_fork_server_means_spawned_workers(monkeypatch):
     """Where the fork server cannot start, the local cluster spawns its workers."""
     import multiprocessing.forkserver
