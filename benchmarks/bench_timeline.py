@@ -35,8 +35,6 @@ def main() -> None:
         from sweeps.cluster import start_fork_server
 
         start_fork_server()
-    from distributed import get_task_stream
-
     from sweeps import cluster
     from sweeps.config import load_config
     from sweeps.runner import run_sweep
@@ -47,11 +45,17 @@ def main() -> None:
     @contextlib.contextmanager
     def recorded(*a, **k):
         with connect(*a, **k) as pool:
-            seen["ready"] = time.time()
-            seen["workers"] = pool.client.run(_process_times)
+            # Imported here: the command imports distributed in connect.
+            from distributed import get_task_stream
+
+            seen["ready"] = time.time()  # the precompute workers
             with get_task_stream(pool.client) as ts:
                 yield pool
             seen["tasks"] = ts.data
+            seen["workers"] = pool.client.run(_process_times)
+            seen["evaluators"] = [a for a, w in pool.client.scheduler_info(
+                n_workers=-1)["workers"].items() if "evaluate" in w["resources"]]
+            seen["marks"] = pool.client.run(_warm_up_marks, workers=seen["evaluators"])
 
     cluster.connect = recorded
     summary = run_sweep(load_config(args.config), Path(args.out),
@@ -60,6 +64,12 @@ def main() -> None:
     end = time.time()
     print(json.dumps(summary))
     _report(seen, end)
+
+
+def _warm_up_marks() -> dict:
+    from sweeps.evaluation_worker import WARM_UP_MARKS
+
+    return dict(WARM_UP_MARKS)
 
 
 def _process_times() -> dict:
@@ -78,9 +88,16 @@ def _report(seen: dict, end: float) -> None:
     def t(x: float) -> str:
         return f"{x - T0:7.3f}"
 
-    created = [w["created"] for w in seen["workers"].values()]
-    print(f"worker processes created {t(min(created))} .. {t(max(created))}; "
-          f"all ready {t(seen['ready'])}; command ended {t(end)}")
+    for name, mine in (("precompute", False), ("evaluation", True)):
+        created = [w["created"] for a, w in seen["workers"].items()
+                   if (a in seen["evaluators"]) == mine]
+        if created:
+            print(f"{name} worker processes created {t(min(created))} .. {t(max(created))}")
+    print(f"precompute workers ready {t(seen['ready'])}; command ended {t(end)}")
+    for marks in seen["marks"].values():
+        if marks:
+            print("evaluation worker's last warm-up: " + ", ".join(
+                f"{k} {t(v).strip()}" for k, v in marks.items()))
     kinds: dict[str, list] = defaultdict(list)
     for task in seen["tasks"]:
         kind = task["key"].split("-")[0] if not task["key"].startswith("warm-up") \

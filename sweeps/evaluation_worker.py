@@ -134,22 +134,37 @@ def warm_up(job: ChunkJob, ref) -> dict:
     return {**_warm_up(job, ref), "early": False}
 
 
+# When the steps of this process's last warm-up ended, on the wall clock (read by
+# benchmarks/bench_timeline.py): begun, imports (JAX among them), device (the backend up),
+# baked (the scene precomputed and baked), ended (the program loaded or compiled, and run).
+WARM_UP_MARKS: dict[str, float] = {}
+
+
 def _warm_up(job: ChunkJob, ref) -> dict:
+    WARM_UP_MARKS.clear()
+    WARM_UP_MARKS["begun"] = time.time()
+    import jax
+
     from geometry_precompute import precompute, random_scene
     from geometry_precompute.scene import Scene
 
     from .pipeline import evaluate_points
     from .workers import bake_batch, point_settings
 
+    WARM_UP_MARKS["imports"] = time.time()
     _setup()
+    jax.devices()
+    WARM_UP_MARKS["device"] = time.time()
     before = dict(_COUNTS)
     t0 = time.perf_counter()
     scene = ref if isinstance(ref, Scene) else random_scene(*ref)
     settings = point_settings(list(job.points))
     batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
                        job.shapes.tasks, job.shapes.objects, 0.0, settings)
+    WARM_UP_MARKS["baked"] = time.time()
     evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
                     job.modes)
+    WARM_UP_MARKS["ended"] = time.time()
     loaded = _COUNTS["loaded"] - before["loaded"]
     return {"seconds": time.perf_counter() - t0, "loaded": loaded,
             "compiled": _COUNTS["programs"] - before["programs"] - loaded}
