@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -47,7 +48,7 @@ def _read(cls, baked, dtype=None):
     """``cls``'s fields read from the bake by name (attributes or a mapping); floats
     cast to ``dtype`` (default: float64 when jax_enable_x64 is on, else float32),
     integers to int32."""
-    dtype = dtype or jnp.zeros(()).dtype
+    dtype = dtype or jax.dtypes.canonicalize_dtype(np.float64)
     get = baked.__getitem__ if isinstance(baked, dict) else lambda k: getattr(baked, k)
     out = {}
     for name in cls._fields:
@@ -56,7 +57,9 @@ def _read(cls, baked, dtype=None):
             a = a.astype(dtype)
         elif a.dtype.kind in "iu":
             a = a.astype(np.int32)
-        out[name] = jnp.asarray(a)
+        # A plain copy to the device: jnp.asarray would compile (or load from the
+        # persistent cache) a small program per shape and dtype, ten per chunk shape.
+        out[name] = jax.device_put(a)
     return cls(**out)
 
 
