@@ -188,7 +188,7 @@ def test_compilation_cache_is_written_then_reused(tmp_path):
     assert first.returncode == 0, first.stderr
     stored = sorted(str(p.relative_to(cache)) for p in cache.rglob("*"))
     assert any(name.startswith("programs/export-evaluate-") for name in stored), stored
-    assert sum(name.startswith("xla/") for name in stored) >= 2, stored
+    assert any(name.startswith("xla/") for name in stored), stored
     second = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert second.returncode == 0, second.stderr
     assert sorted(str(p.relative_to(cache)) for p in cache.rglob("*")) == stored
