@@ -18,17 +18,19 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from geometry_precompute import InputError
-from geometry_precompute.scene import SceneWarning
-from geometry_precompute.schema import ALL_MODES
-from geometry_precompute.schema import MODES as PAPER
-
+# Nothing heavy here (NumPy and the rest come with main's imports): `shacc sweep` starts
+# its local cluster's fork server before them (main).
 from . import compile_cache
 from .cluster import ClusterLost
 
-# The modes a command may be asked for (the schema's, read without importing JAX);
-# `evaluate` runs the paper's three unless asked: the optimized mode searches first.
-MODES, PAPER_MODES = ALL_MODES, PAPER
+
+def modes() -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The modes a command may be asked for, and the paper's three (the schema's, read
+    without importing JAX); `evaluate` runs the paper's three unless asked: the
+    optimized mode searches first."""
+    from geometry_precompute.schema import ALL_MODES, MODES
+
+    return ALL_MODES, MODES
 
 
 def _add_set(p: argparse.ArgumentParser) -> None:
@@ -84,6 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
                 "defaults: `shacc settings`.", formatter_class=_Help)
     p.add_argument("--version", action="version", version=f"shacc {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
+    MODES, PAPER_MODES = modes()
 
     def command(name: str, help: str) -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help, formatter_class=_Help)
@@ -170,6 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     """A scene's warnings as one line each on stderr (Python's form adds a source line)."""
+    from geometry_precompute.scene import SceneWarning
+
     if issubclass(category, SceneWarning):
         print(f"warning: {message}", file=sys.stderr)
     else:
@@ -179,20 +184,30 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 _default_showwarning = warnings.showwarning
 
 
+def _local_sweep(argv: Sequence[str]) -> bool:
+    """Whether the command line asks for a sweep on a local cluster, read before the
+    parser (which imports the schema, and NumPy with it)."""
+    return argv[:1] == ["sweep"] and "--dry-run" not in argv and not any(
+        a == "--scheduler" or a.startswith("--scheduler=") for a in argv)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if _local_sweep(argv):
+        # First thing, before this process imports NumPy, dask and the rest: the local
+        # cluster's fork server imports the workers' modules meanwhile (a config that
+        # names a scheduler leaves the server unused; it ends with this process).
+        from .cluster import start_fork_server
+
+        start_fork_server()
+    from geometry_precompute import InputError
+
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
     # The sweep's evaluation workers turn the cache on for themselves; its client
     # process never loads JAX.
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
         compile_cache.enable()
-    if args.command == "sweep" and not (args.dry_run or args.scheduler):
-        # First thing: the local cluster's fork server imports the workers' modules while
-        # this process reads the config and imports its own (a config that names a
-        # scheduler leaves the server unused; it ends with this process).
-        from .cluster import start_fork_server
-
-        start_fork_server()
     module, name = args.func.split(":")
     try:
         func = getattr(importlib.import_module(f"{__package__}.{module}"), name)

@@ -33,8 +33,6 @@ import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from geometry_precompute import InputError
-
 PRECOMPUTE = "precompute"
 EVALUATE = "evaluate"
 QUIET = {"DASK_LOGGING__DISTRIBUTED": "critical"}  # a closing cluster logs errors
@@ -169,11 +167,14 @@ def dask_setup(worker) -> None:
 
 
 # What every local worker imports, loaded once in the fork server (below) rather than by
-# each new interpreter. Kept to what is light: the server imports one module after
-# another, and a long list (pandas, pyarrow, scipy, the mesh libraries) made the workers
-# start later than spawning them did (benchmarks/RESULTS.md). Never JAX: an evaluation
-# worker is pinned to its GPU by a variable that JAX reads when it starts.
-FORK_PRELOAD = ("distributed", "sweeps.cluster", "sweeps.workers", "sweeps.evaluation_worker")
+# each new interpreter. Kept short: the server imports one module after another, and a
+# long list (pandas, pyarrow, scipy, the mesh libraries) made the workers start later
+# than spawning them did. scipy's rotations (every bake's first use, 0.5 s a worker on
+# the H100 hosts) joined once `shacc sweep` started the server before its own imports
+# (benchmarks/RESULTS.md). Never JAX: an evaluation worker is pinned to its GPU by a
+# variable that JAX reads when it starts.
+FORK_PRELOAD = ("distributed", "sweeps.cluster", "sweeps.workers", "sweeps.evaluation_worker",
+                "scipy.spatial.transform")
 # What distributed's nanny sets before it starts a worker (its
 # distributed.nanny.pre-spawn-environ defaults): the fork server imports NumPy, so they
 # must be set before the server starts.
@@ -188,11 +189,11 @@ def start_fork_server() -> bool:
     imports run while this process goes on with its own. Idempotent. The server ends
     when this process and every worker forked from it have ended (it waits on a pipe
     that each of them holds), SIGKILL included. False where the platform has no fork
-    server: the workers are then spawned, each importing anew."""
+    server: the workers are then spawned, each importing anew. This module imports
+    nothing heavy, so that ``shacc sweep`` can start the server before it imports
+    NumPy, dask and the rest."""
     import multiprocessing
     import multiprocessing.forkserver
-
-    import dask
 
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
@@ -201,11 +202,13 @@ def start_fork_server() -> bool:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORK_PRELOAD))
     try:
         multiprocessing.forkserver.ensure_running()
+        method = "forkserver"
     except OSError:  # no Unix socket or no process to be had: spawn, as distributed does
-        dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
-        return False
-    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
-    return True
+        method = "spawn"
+    import dask  # after the server's start: its imports and these overlap
+
+    dask.config.set({"distributed.worker.multiprocessing-method": method})
+    return method == "forkserver"
 
 
 def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
@@ -307,6 +310,8 @@ def connect(scheduler: str | None = None, workers: int | None = None,
             cluster, n_cpu, n_eval = _local(workers, warm_up or {})
             client = Client(cluster)
         else:
+            from geometry_precompute import InputError
+
             try:
                 client = Client(scheduler, timeout=timeout)
             except (OSError, TimeoutError, ValueError) as e:
@@ -330,6 +335,8 @@ def connect(scheduler: str | None = None, workers: int | None = None,
 
 
 def _remote(client, scheduler: str, timeout: float) -> Pool:
+    from geometry_precompute import InputError
+
     try:
         client.wait_for_workers(1, timeout=timeout)
     except TimeoutError:

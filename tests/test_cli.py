@@ -203,7 +203,19 @@ def test_cli_mode_names_are_the_evaluators():
     import shacc_jax
     from sweeps import cli
 
-    assert cli.MODES == shacc_jax.ALL_MODES and cli.PAPER_MODES == shacc_jax.MODES
+    assert cli.modes() == (shacc_jax.ALL_MODES, shacc_jax.MODES)
+
+
+def test_cli_module_imports_nothing_heavy():
+    """`shacc sweep` starts its local cluster's fork server before NumPy, dask and the
+    rest are imported (sweeps.cli.main): importing the command line's module, and the
+    cluster's, imports none of them."""
+    heavy = ("numpy", "dask", "distributed", "jax", "geometry_precompute", "pyarrow")
+    code = (f"import sys, sweeps.cli, sweeps.cluster; "
+            f"print([m for m in {heavy!r} if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
 
 
 def test_precompute_command_does_not_import_jax(tmp_path):
