@@ -28,6 +28,20 @@ def test_buckets():
     assert len(set(sizes)) < 60  # a few programs for every chunk size up to 20 000
 
 
+def test_precompute_batches_cover_the_chunk_in_order():
+    """Every scene of a chunk in exactly one precompute task, in order; at most 64 a
+    task, at most two tasks per worker thread (unless that cap needs more), and at least
+    one per thread where the chunk has the scenes."""
+    from sweeps.plan import precompute_batches
+
+    for n, workers in [(1000, 16), (1000, 30), (1000, 4), (3, 2), (7, 1), (64, 64)]:
+        parts = precompute_batches(range(100, 100 + n), workers)
+        assert [i for p in parts for i in p] == list(range(100, 100 + n))
+        assert max(map(len, parts)) <= 64
+        assert len(parts) <= 2 * workers or max(map(len, parts)) == 64
+        assert len(parts) >= min(n, workers)
+
+
 def test_plan_depends_on_the_config_alone(tmp_path, monkeypatch):
     cfg = load_config(write(tmp_path, CONFIG.replace("chunk = 1", "chunk = 2")
                             + "[[points]]\nshrink_step = 0.2\n"))
