@@ -30,9 +30,44 @@ def part_path(out: Path, table: str, index: int) -> Path:
     return out / table / PART.format(index)
 
 
+# The columns are Arrow arrays made from the NumPy arrays' buffers (no copy), not with
+# ``pa.array``: its first call in a process imports pandas (pyarrow's pandas shim looks
+# for pandas objects), 0.3-0.6 s of the first chunk a worker encodes, and a sweep's CPU
+# workers each encode about one chunk (benchmarks/RESULTS.md).
+
+
+def _numbers(values: np.ndarray, valid: np.ndarray | None = None) -> pa.Array:
+    """A 1-d NumPy array of integers or floats as an Arrow array; ``valid``: False where
+    the value is null."""
+    a = np.ascontiguousarray(values)
+    if a.ndim != 1 or a.dtype.kind not in "iuf" or not a.dtype.isnative:
+        raise TypeError(f"expected a 1-d array of native integers or floats, got {a.dtype} "
+                        f"{a.shape}")
+    if valid is None:
+        return pa.Array.from_buffers(pa.from_numpy_dtype(a.dtype), len(a),
+                                     [None, pa.py_buffer(a)], null_count=0)
+    valid = np.asarray(valid, bool)
+    bitmap = pa.py_buffer(np.packbits(valid, bitorder="little"))
+    return pa.Array.from_buffers(pa.from_numpy_dtype(a.dtype), len(a),
+                                 [bitmap, pa.py_buffer(a)], null_count=int((~valid).sum()))
+
+
+def _strings(values) -> pa.Array:
+    """Python strings (None: null) as an Arrow string array."""
+    values = list(values)
+    data = [b"" if v is None else str(v).encode() for v in values]
+    offsets = np.zeros(len(data) + 1, np.int32)
+    np.cumsum([len(d) for d in data], out=offsets[1:])
+    valid = np.array([v is not None for v in values], bool)
+    bitmap = None if valid.all() else pa.py_buffer(np.packbits(valid, bitorder="little"))
+    return pa.Array.from_buffers(pa.string(), len(data), [
+        bitmap, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))],
+        null_count=int((~valid).sum()))
+
+
 def _dictionary(codes: np.ndarray, names) -> pa.DictionaryArray:
-    return pa.DictionaryArray.from_arrays(pa.array(codes.astype(np.int8, copy=False)),
-                                          pa.array(list(names), pa.string()))
+    return pa.DictionaryArray.from_arrays(_numbers(codes.astype(np.int8, copy=False)),
+                                          _strings(names))
 
 
 def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indices,
@@ -41,20 +76,20 @@ def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indi
     (``labels``: name, n_tasks, C_init, C_final, d, h per scene), and per mode the
     success rate, mean delta_R and the count of each outcome."""
     S = len(scene_indices)
-    cols = {"point": pa.array(np.full(S, point_index, np.int64))}
+    cols = {"point": _numbers(np.full(S, point_index, np.int64))}
     for k in setting_names:
-        cols[f"set.{k}"] = pa.array([str(point[k]) if k in point else None] * S, pa.string())
-    cols["scene_index"] = pa.array(np.asarray(scene_indices, np.int64))
-    cols["scene"] = pa.array(labels["name"], pa.string())
-    cols["n_tasks"] = pa.array(np.asarray(labels["n_tasks"], np.int64))
+        cols[f"set.{k}"] = _strings([str(point[k]) if k in point else None] * S)
+    cols["scene_index"] = _numbers(np.asarray(scene_indices, np.int64))
+    cols["scene"] = _strings(labels["name"])
+    cols["n_tasks"] = _numbers(np.asarray(labels["n_tasks"], np.int64))
     for name in ("C_init", "C_final", "d", "h"):
-        cols[name] = pa.array(np.asarray(labels[name], np.float64))
+        cols[name] = _numbers(np.asarray(labels[name], np.float64))
     for m, mode in enumerate(modes):
-        cols[f"{mode}.success"] = pa.array(np.asarray(metrics.u_scene[:S, m], np.float64))
+        cols[f"{mode}.success"] = _numbers(np.asarray(metrics.u_scene[:S, m], np.float64))
         dr = np.asarray(metrics.delta_R_mean[:S, m], np.float64)
-        cols[f"{mode}.delta_R_mean"] = pa.array(dr, mask=~np.isfinite(dr))
+        cols[f"{mode}.delta_R_mean"] = _numbers(dr, valid=np.isfinite(dr))
         for o, outcome in enumerate(OUTCOMES):
-            cols[f"{mode}.n_{outcome}"] = pa.array(
+            cols[f"{mode}.n_{outcome}"] = _numbers(
                 np.asarray(metrics.outcome_counts[:S, m, o], np.int64))
     return pa.table(cols)
 
@@ -76,15 +111,15 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
         return np.broadcast_to(along, shape).reshape(-1)[keep]
 
     return pa.table({
-        "point": pa.array(np.full(int(keep.sum()), point_index, np.int32)),
-        "scene_index": pa.array(index(0, scene_indices, np.int32)),
+        "point": _numbers(np.full(int(keep.sum()), point_index, np.int32)),
+        "scene_index": _numbers(index(0, scene_indices, np.int32)),
         "mode": _dictionary(index(1, np.arange(shape[1]), np.int8), modes),
-        "start": pa.array(index(2, np.arange(shape[2]), np.int32)),
-        "task": pa.array(index(3, np.arange(shape[3]), np.int16)),
+        "start": _numbers(index(2, np.arange(shape[2]), np.int32)),
+        "task": _numbers(index(3, np.arange(shape[3]), np.int16)),
         "outcome": _dictionary(flat(outcome, np.int8), OUTCOMES),
-        "activated": pa.array(flat(rollouts.activated, np.int16)),
-        "steps": pa.array(flat(rollouts.step, np.int32)),
-        "delta_R": pa.array(flat(rollouts.delta_R, np.float32)),
+        "activated": _numbers(flat(rollouts.activated, np.int16)),
+        "steps": _numbers(flat(rollouts.step, np.int32)),
+        "delta_R": _numbers(flat(rollouts.delta_R, np.float32)),
     })
 
 
