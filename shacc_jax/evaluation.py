@@ -389,16 +389,16 @@ def evaluate_on_devices(geometry: Geometry, params: Params, layout: Layout,
     import numpy as np
 
     devices = list(devices or jax.local_devices())
+
+    def on(device, g, p):
+        g, p = jax.device_put((g, p), device)  # nothing to copy for arrays already there
+        return _host(evaluate_cached(g, p, layout))
+
+    if len(devices) == 1 or geometry.task_mask.shape[0] == 1:
+        return on(devices[0], geometry, params)
     geometry, params = _host(geometry), _host(params)
     S = geometry.task_mask.shape[0]
     axis = params.dt.ndim - 1
-
-    def on(device, g, p):
-        g, p = jax.device_put((g, p), device)
-        return _host(evaluate_cached(g, p, layout))
-
-    if len(devices) == 1 or S == 1:
-        return on(devices[0], geometry, params)
     per = -(-S // len(devices))
     geometry, params = _pad_scenes(geometry, params, len(devices))
     parts = [(jax.tree.map(lambda a, k=k: a[k * per:(k + 1) * per], geometry),
