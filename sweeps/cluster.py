@@ -171,8 +171,8 @@ def dask_setup(worker) -> None:
 # long list (pandas, pyarrow, scipy, the mesh libraries) made the workers start later
 # than spawning them did. scipy's rotations (every bake's first use, 0.5 s a worker on
 # the H100 hosts) joined once `shacc sweep` started the server before its own imports
-# (benchmarks/RESULTS.md). Never JAX: an evaluation worker is pinned to its GPU by a
-# variable that JAX reads when it starts.
+# (benchmarks/RESULTS.md). Never JAX: preloaded, it made every worker start 1.4 s later
+# and the evaluation worker's warm-up end no sooner.
 FORK_PRELOAD = ("distributed", "sweeps.cluster", "sweeps.workers", "sweeps.evaluation_worker",
                 "scipy.spatial.transform")
 # What distributed's nanny sets before it starts a worker (its
