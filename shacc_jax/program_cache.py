@@ -5,8 +5,8 @@ still traces and lowers the evaluation (about 1.6 s of Python on a CPU for the
 vmapped Automaton, more than the rest of ``shacc evaluate`` together). This module
 stores the lowered program itself, serialised by ``jax.export``, keyed by everything
 that decides it: the source of this package and of the bake's schema, the jax and
-jaxlib versions, the backend, x64 mode, the static arguments and the input shapes
-and dtypes. A later
+jaxlib versions, the backend, x64 mode, the stack frames kept in source locations,
+the static arguments and the input shapes and dtypes. A later
 process with the same key deserialises the program and calls it; its compilation
 then comes from the persistent cache. Any change to the code gives a new key.
 
@@ -63,7 +63,10 @@ def _key(name: str, static: tuple, tree, leaves: list) -> str:
     import jaxlib
 
     parts = [name, _source_hash(), jax.__version__, jaxlib.__version__,
-             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static), str(tree)]
+             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static), str(tree),
+             # the stack frames kept in the program's source locations
+             str(jax.config.jax_traceback_in_locations_limit),
+             str(jax.config.jax_include_full_tracebacks_in_locations)]
     parts += [f"{tuple(x.shape)}:{x.dtype}" for x in leaves]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 

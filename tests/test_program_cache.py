@@ -52,3 +52,33 @@ def test_new_shapes_make_a_new_entry(shipped_results, tmp_path):
     finally:
         program_cache.set_dir(previous)
         program_cache.forget_loaded()
+
+
+def test_lean_locations_drop_the_stack_frames(monkeypatch):
+    """After compile_cache.lean_locations a traced program names no Python file in its
+    source locations (XLA formats them into annotations at every load), a user's
+    JAX_TRACEBACK_IN_LOCATIONS_LIMIT wins, and the exported program's key changes with
+    the setting (an entry traced with frames is not reused without them)."""
+    from sweeps import compile_cache
+
+    def locations() -> str:  # a new function each time: JAX reuses a function's trace
+        return jax.jit(lambda x: x * 2.0 + 1.0).lower(np.ones(3, np.float32)).as_text(
+            debug_info=True)
+
+    here = __file__.rsplit("/", 1)[-1]
+    leaves, tree = jax.tree.flatten((np.ones(3, np.float32),))
+    previous = jax.config.jax_traceback_in_locations_limit
+    try:
+        jax.config.update("jax_traceback_in_locations_limit", 10)
+        assert here in locations()
+        framed = program_cache._key("f", (), tree, leaves)
+        monkeypatch.setenv(compile_cache.LOCATIONS_ENV, "10")
+        compile_cache.lean_locations()  # the user's setting: left alone
+        assert jax.config.jax_traceback_in_locations_limit == 10
+        monkeypatch.delenv(compile_cache.LOCATIONS_ENV)
+        compile_cache.lean_locations()
+        assert jax.config.jax_traceback_in_locations_limit == 0
+        assert here not in locations()
+        assert program_cache._key("f", (), tree, leaves) != framed
+    finally:
+        jax.config.update("jax_traceback_in_locations_limit", previous)
