@@ -186,9 +186,15 @@ _default_showwarning = warnings.showwarning
 
 def _local_sweep(argv: Sequence[str]) -> bool:
     """Whether the command line asks for a sweep on a local cluster, read before the
-    parser (which imports the schema, and NumPy with it)."""
-    return argv[:1] == ["sweep"] and "--dry-run" not in argv and not any(
-        a == "--scheduler" or a.startswith("--scheduler=") for a in argv)
+    parser (which imports the schema, and NumPy with it). Options are recognised as
+    argparse does, abbreviated too (``--dry``, ``--sched=ADDRESS``). A wrong guess
+    costs only time: an unused fork server ends with this process, and a local
+    cluster starts its own when none was started."""
+    def given(option: str) -> bool:
+        return any(len(name) > 2 and option.startswith(name)
+                   for name in (a.split("=", 1)[0] for a in argv[1:] if a.startswith("--")))
+
+    return argv[:1] == ["sweep"] and not given("--dry-run") and not given("--scheduler")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
