@@ -54,6 +54,10 @@ class ChunkResult:
     worker: str = ""
 
 
+# The rollout fields the tables hold, and the dtypes they travel in; only these are copied
+# from the accelerator (17 of a 1 000-scene chunk's 57 MB).
+COMPACT = {"outcome": "int8", "activated": "int16", "step": "int32", "delta_R": "float32"}
+
 _LOCK = threading.Lock()
 _COUNTS = {"programs": 0, "loaded": 0}
 _READY = False
@@ -163,7 +167,7 @@ def _warm_up(job: ChunkJob, ref) -> dict:
                        job.shapes.tasks, job.shapes.objects, 0.0, settings)
     WARM_UP_MARKS["baked"] = time.time()
     evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
-                    job.modes)
+                    job.modes, tuple(COMPACT))
     WARM_UP_MARKS["ended"] = time.time()
     loaded = _COUNTS["loaded"] - before["loaded"]
     return {"seconds": time.perf_counter() - t0, "loaded": loaded,
@@ -198,11 +202,10 @@ def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
              for k in range(len(job.points))]
     labels = {k: [x for b in batches for x in b.scenes[k]] for k in batches[0].scenes}
     t1 = time.perf_counter()
-    evs = evaluate_points(bakes, job.modes)
+    evs = evaluate_points(bakes, job.modes, tuple(COMPACT))
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
-    small = {"outcome": "int8", "activated": "int16", "step": "int32", "delta_R": "float32"}
-    rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in small.items()}
+    rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}
                 for ev in evs]
     metrics = [{k: getattr(ev.metrics, k)[:S] for k in
                 ("u_scene", "delta_R_mean", "outcome_counts")} for ev in evs]

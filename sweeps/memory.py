@@ -106,7 +106,9 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
     of a bake's ``modes``, as NumPy arrays, split over the start grid when the batch
     needs more than ``limit`` bytes (default :func:`budget`). ``params``: P Params of
     this bake's scenes (sweep points over its geometry), evaluated in one call with a
-    points axis; the results then have a leading axis P."""
+    points axis; the results then have a leading axis P. Rollouts fields that
+    ``evaluate`` leaves None (``evaluate_on_devices``' ``fields``) stay None; a split
+    batch needs outcome and delta_R for its metrics."""
     run = evaluate or shacc_jax.evaluate_on_devices
     stacked = None if params is None else jax.tree.map(
         lambda *xs: np.stack([np.asarray(x) for x in xs]), *params)
@@ -139,9 +141,9 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
         idx = np.minimum(np.arange(a, a + n_per), N - 1)  # the last piece padded: one shape
         out = evaluate(replace(baked, starts=baked.starts[:, idx]))
         keep = min(n_per, N - a)
-        pieces.append([np.take(np.asarray(x), np.arange(keep), axis=2 + lead)
-                       for x in out.rollouts])
-    rollouts = Rollouts(*(np.concatenate(parts, axis=2 + lead)
+        pieces.append([None if x is None else np.take(np.asarray(x), np.arange(keep),
+                                                      axis=2 + lead) for x in out.rollouts])
+    rollouts = Rollouts(*(None if parts[0] is None else np.concatenate(parts, axis=2 + lead)
                           for parts in zip(*pieces, strict=True)))
     if lead:  # the points as more scenes
         flat = [r.reshape(P * S, *r.shape[2:]) for r in (rollouts.outcome, rollouts.delta_R)]

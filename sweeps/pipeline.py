@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import jax
 import numpy as np
@@ -44,6 +45,8 @@ def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) 
         return ev0
 
     def pick(get):
+        if get(parts[modes[0]][0]) is None:  # a field not copied to the host
+            return None
         return np.concatenate([np.asarray(get(parts[m][0]))[:, parts[m][1]:parts[m][1] + 1]
                                for m in modes], axis=1)
     ev0 = next(iter(parts.values()))[0]
@@ -83,17 +86,22 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     return _join_modes(parts, modes), found
 
 
-def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str]) -> list[Evaluation]:
+def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str],
+                    fields: Sequence[str] | None = None) -> list[Evaluation]:
     """Bakes of the same scenes that differ only in rollout settings (Params), evaluated
     as one call with a points axis; NumPy results, one Evaluation per bake. The
-    optimized mode searches per bake (its search depends on the rollout settings)."""
+    optimized mode searches per bake (its search depends on the rollout settings).
+    ``fields``: the Rollouts fields to copy to the host, the others None (default all;
+    ``shacc_jax.evaluate_on_devices``)."""
+    run = shacc_jax.evaluate_on_devices if fields is None else \
+        partial(shacc_jax.evaluate_on_devices, fields=fields)
     if len(bakes) == 1 or OPTIMIZED in modes:
-        return [evaluate_baked(b, modes)[0] for b in bakes]
+        return [evaluate_baked(b, modes, run)[0] for b in bakes]
     for b in bakes[1:]:  # a grouping error would evaluate one point on another's spaces
         for name in GEOMETRY_FIELDS:
             if not np.array_equal(getattr(b, name), getattr(bakes[0], name)):
                 raise RuntimeError(f"sweep points grouped together differ in {name}")
-    ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), params=[
+    ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), run, params=[
         shacc_jax.Params.from_bake(b) for b in bakes])
     return [jax.tree.map(lambda a, i=i: a[i], ev) for i in range(len(bakes))]
 

@@ -132,6 +132,41 @@ def test_grid_in_pieces_equals_one_piece(shipped_results):
                                rtol=1e-5, equal_nan=True)
 
 
+def test_only_the_named_fields_reach_the_host(shipped_results):
+    """``evaluate_on_devices(fields=...)`` (what a sweep's chunks use) copies only those
+    Rollouts fields: equal to the full evaluation's, the others None, also when the
+    batch is split into pieces; a name that is no field is refused."""
+    from functools import partial
+
+    import shacc_jax
+    from geometry_precompute import bake
+    from sweeps.pipeline import evaluate_points
+
+    baked = bake(shipped_results[8:10])
+    whole = evaluate_in_pieces(baked, shacc_jax.MODES, limit=2**40)
+    keep = ("outcome", "step", "delta_R")
+    run = partial(shacc_jax.evaluate_on_devices, fields=keep)
+    per_start = bytes_per_rollout(False) * baked.n_scenes * baked.n_tasks * 3
+    one = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=2**40)
+    pieces = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=per_start * 10)
+    two_points = evaluate_points([baked, baked], shacc_jax.MODES, keep)
+    for got in (one, pieces, *two_points):
+        for name in whole.rollouts._fields:
+            a, b = getattr(whole.rollouts, name), getattr(got.rollouts, name)
+            if name == "delta_R":  # pieces may round differently (see the test above)
+                np.testing.assert_allclose(np.cos(a / 2), np.cos(b / 2), rtol=0,
+                                           atol=4 * np.finfo(np.float32).eps, equal_nan=True)
+            elif name in keep:
+                np.testing.assert_array_equal(a, b, err_msg=name)
+            else:
+                assert getattr(got.rollouts, name) is None, name
+        np.testing.assert_array_equal(got.metrics.outcome_counts, whole.metrics.outcome_counts)
+    with pytest.raises(ValueError, match=r"'orientaton' not among the Rollouts fields"):
+        shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked), fields=("orientaton",))
+    with pytest.raises(ValueError, match="not the string 'outcome'"):
+        shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked), fields="outcome")
+
+
 def test_budget_from_the_environment_splits_evaluate(monkeypatch):
     r = precompute(load_scene(SCENE))
     whole = evaluate_results([r])

@@ -303,6 +303,11 @@ assert both.rollouts.outcome.shape == (2, *one.rollouts.outcome.shape)
 np.testing.assert_array_equal(both.rollouts.outcome[1], slow.rollouts.outcome)
 assert (both.rollouts.step[1] != both.rollouts.step[0]).any()  # v_max mattered
 two = jax.tree.map(lambda a: a[0], both)
+# Only some fields copied to the host, over two devices: those equal, the others None.
+kept = shacc_jax.evaluate_on_devices(g, p2, layout, fields=("outcome", "delta_R"))
+np.testing.assert_array_equal(kept.rollouts.outcome, both.rollouts.outcome)
+np.testing.assert_array_equal(kept.rollouts.delta_R, both.rollouts.delta_R)
+assert kept.rollouts.step is None and kept.rollouts.orientation is None
 for other in (two, mesh):
     for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(other)):
         if x.dtype.kind == "f":  # float32: another batch shape may round differently
