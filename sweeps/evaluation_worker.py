@@ -1,11 +1,11 @@
 """A sweep chunk's way from its precomputed scenes to the bytes of its two Parquet parts.
 
-On a worker that holds the accelerator (or the CPU evaluation worker),
-:func:`warm_up` compiles the chunks' program early and :func:`evaluate_chunk` joins
-the bakes the precompute tasks made (at the sweep's padded shapes, ``plan.Shapes``)
-and evaluates every point of the chunk's group in one call; on a CPU worker,
-:func:`encode_chunk` builds the Arrow tables and encodes them, so that only bytes
-travel back to the machine that writes the output.
+On a CPU worker, :func:`join_chunk` joins the bakes the precompute tasks made (at the
+sweep's padded shapes, ``plan.Shapes``); on a worker that holds the accelerator (or the
+CPU evaluation worker), :func:`warm_up` compiles the chunks' program early and
+:func:`evaluate_chunk` evaluates every point of the chunk's group in one call; on a
+CPU worker again, :func:`encode_chunk` builds the Arrow tables and encodes them, so
+that only bytes travel back to the machine that writes the output.
 The compiled programs persist on disk (``compile_cache``); the compilations each chunk
 caused are counted with JAX's monitoring events and reported.
 """
@@ -189,20 +189,44 @@ class ChunkArrays:
     worker: str
 
 
-def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
-    """``batches``: the chunk's precompute tasks' results, in order
-    (``workers.Batch``: each point's bake of its scenes). Only the accelerator's part
-    runs here; :func:`encode_chunk` makes the tables on a CPU worker."""
-    from .pipeline import evaluate_points
+@dataclass(frozen=True)
+class JoinedChunk:
+    """A chunk's precompute tasks' results as one input of its evaluation."""
 
-    _setup()
-    before = dict(_COUNTS)
+    bakes: list           # per point: the chunk's scenes as one bake, padded to its shape
+    labels: dict          # per scene: name, n_tasks, C_init, C_final, d, h
+    counts: dict          # precomputed, cache_hits
+    seconds: dict         # busy time: precompute (its tasks), join
+
+
+def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
+    """``batches``: the chunk's precompute tasks' results, in order (``workers.Batch``:
+    each point's bake of its scenes), joined into one bake per point. A CPU worker's
+    task in a sweep, so that the accelerator's worker, which evaluates the chunks one
+    after another, spends its time on the evaluations only."""
     t0 = time.perf_counter()
     bakes = [concatenate([b.bakes[k] for b in batches], pad_to=job.shapes.scenes)
              for k in range(len(job.points))]
     labels = {k: [x for b in batches for x in b.scenes[k]] for k in batches[0].scenes}
+    return JoinedChunk(bakes, labels,
+                       {"precomputed": sum(b.precomputed for b in batches),
+                        "cache_hits": sum(b.cache_hits for b in batches)},
+                       {"precompute": sum(b.seconds for b in batches),
+                        "join": time.perf_counter() - t0})
+
+
+def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
+    """``batches``: the chunk's :class:`JoinedChunk` (what a sweep passes), or its
+    precompute tasks' results, joined here. Only the accelerator's part runs here;
+    :func:`encode_chunk` makes the tables on a CPU worker."""
+    from .pipeline import evaluate_points
+
+    _setup()
+    before = dict(_COUNTS)
+    joined = batches[0] if len(batches) == 1 and isinstance(batches[0], JoinedChunk) else \
+        join_chunk(job, *batches)
     t1 = time.perf_counter()
-    evs = evaluate_points(bakes, job.modes, tuple(COMPACT))
+    evs = evaluate_points(joined.bakes, job.modes, tuple(COMPACT))
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}
@@ -212,11 +236,8 @@ def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
     t2 = time.perf_counter()
     programs = _COUNTS["programs"] - before["programs"]
     loaded = _COUNTS["loaded"] - before["loaded"]
-    return ChunkArrays(rollouts, metrics, labels,
-                       {"precomputed": sum(b.precomputed for b in batches),
-                        "cache_hits": sum(b.cache_hits for b in batches)},
-                       {"precompute": sum(b.seconds for b in batches),
-                        "join": t1 - t0, "evaluate": t2 - t1},
+    return ChunkArrays(rollouts, metrics, joined.labels, joined.counts,
+                       {**joined.seconds, "evaluate": t2 - t1},
                        programs - loaded, loaded, f"{socket.gethostname()}:{os.getpid()}")
 
 

@@ -266,7 +266,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     from distributed import as_completed
 
     from . import evaluation_worker
-    from .evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk
+    from .evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk, join_chunk
     from .workers import precompute_batch
 
     client = pool.client
@@ -310,12 +310,15 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             batches.append(f)
             done.add(f)
         job = ChunkJob(c, tuple(points), cfg.modes, shp, names)
-        ev = client.submit(evaluate_chunk, job, *batches, key=f"evaluate-{run}-{c.index}",
+        # Joined on a CPU worker: the evaluation worker then only evaluates.
+        joined = client.submit(join_chunk, job, *batches, key=f"join-{run}-{c.index}",
+                               priority=-c.index, resources=pool.precompute, pure=False)
+        ev = client.submit(evaluate_chunk, job, joined, key=f"evaluate-{run}-{c.index}",
                            priority=-c.index, resources=pool.evaluate, pure=False)
         enc = client.submit(encode_chunk, job, ev, key=f"encode-{run}-{c.index}",
                             priority=1_000_000 - c.index, resources=pool.precompute,
                             pure=False)
-        flying[enc.key] = (c, [*batches, ev, enc])
+        flying[enc.key] = (c, [*batches, joined, ev, enc])
         done.add(enc)
 
     def fill() -> None:
