@@ -125,7 +125,12 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
 
 def parquet_bytes(table: pa.Table) -> bytes:
     """A table as the bytes of one Parquet file (made where the table is, written by
-    the machine that owns the output)."""
+    the machine that owns the output). Every column but the floating-point ones is
+    dictionary-encoded: a float column (delta_R: some 290 000 distinct values in a
+    1 000-scene chunk's 1.08 M rows) only fills a dictionary page to give it up. Without
+    it, such a chunk's rollouts encode in 0.070 s instead of 0.094 s and take 3.81
+    instead of 4.27 MB (the 2-core development machine)."""
     sink = io.BytesIO()
-    pq.write_table(table, sink)
+    pq.write_table(table, sink, use_dictionary=[
+        f.name for f in table.schema if not pa.types.is_floating(f.type)])
     return sink.getvalue()

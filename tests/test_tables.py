@@ -80,3 +80,28 @@ def test_a_chunks_tables_import_no_pandas():
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_parts_dictionary_encode_all_but_the_floats():
+    """A part file keeps its values (floats and NaN included) and dictionary-encodes
+    every column but the floating-point ones."""
+    import io
+
+    import pyarrow.parquet as pq
+
+    rng = np.random.default_rng(1)
+    t = pa.table({"steps": rng.integers(0, 300, 5000).astype(np.int32),
+                  "mode": pa.DictionaryArray.from_arrays(
+                      pa.array(rng.integers(0, 3, 5000).astype(np.int8)),
+                      pa.array(["baseline", "shrinking", "shacc"])),
+                  "delta_R": np.where(rng.random(5000) < .3, np.nan,
+                                      rng.random(5000)).astype(np.float32)})
+    data = tables.parquet_bytes(t)
+    back = pq.read_table(io.BytesIO(data))
+    assert back.select(["steps", "mode"]).equals(t.select(["steps", "mode"]))
+    np.testing.assert_array_equal(back["delta_R"].to_numpy(), t["delta_R"].to_numpy())
+    meta = pq.ParquetFile(io.BytesIO(data)).metadata.row_group(0)
+    enc = {meta.column(i).path_in_schema: meta.column(i).encodings for i in range(3)}
+    assert any("DICTIONARY" in e for e in enc["steps"]), enc
+    assert any("DICTIONARY" in e for e in enc["mode"]), enc
+    assert not any("DICTIONARY" in e for e in enc["delta_R"]), enc
