@@ -1,6 +1,7 @@
-"""Where the time goes for one sweep chunk after its precompute: on the evaluation worker
-the join of the precompute tasks' bakes and the evaluation, then the tables (a CPU
-worker's task in a sweep); then a profile of the evaluation worker's part.
+"""Where the time goes for one sweep chunk after its precompute: the join of the precompute
+tasks' bakes (a CPU worker's task in a sweep, untimed here), the evaluation worker's
+part, then the tables (a CPU worker's task); then a profile of the evaluation worker's
+part.
 
     python benchmarks/bench_chunk.py [--scenes 1024] [--workers 16] [--repeat 3]
 
@@ -28,7 +29,7 @@ def main() -> None:
     from sweeps import compile_cache
     from sweeps.cluster import connect
     from sweeps.config import parse_config
-    from sweeps.evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk
+    from sweeps.evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk, join_chunk
     from sweeps.plan import plan, precompute_batches, shapes
     from sweeps.workers import precompute_batch
 
@@ -48,8 +49,9 @@ def main() -> None:
           f"{time.perf_counter() - t:.2f} s (cluster start included)")
     job = ChunkJob(chunk, ({},), cfg.modes, shp, ())
     for k in range(args.repeat):
+        joined = join_chunk(job, *batches)  # on a CPU worker in a sweep
         t = time.perf_counter()
-        arrays = evaluate_chunk(job, *batches)
+        arrays = evaluate_chunk(job, joined)
         t1 = time.perf_counter()
         res = encode_chunk(job, arrays)  # on a CPU worker in a sweep
         print(f"chunk {k}: evaluation worker {t1 - t:.3f} s, "
@@ -58,7 +60,7 @@ def main() -> None:
               f"compiled {res.compiled} loaded {res.loaded}, {res.n_rollouts} rollouts")
     prof = cProfile.Profile()
     prof.enable()
-    evaluate_chunk(job, *batches)
+    evaluate_chunk(job, joined)
     prof.disable()
     out = io.StringIO()
     pstats.Stats(prof, stream=out).sort_stats("cumulative").print_stats(35)

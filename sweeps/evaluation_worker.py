@@ -215,16 +215,13 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
                         "join": time.perf_counter() - t0})
 
 
-def evaluate_chunk(job: ChunkJob, *batches) -> ChunkArrays:
-    """``batches``: the chunk's :class:`JoinedChunk` (what a sweep passes), or its
-    precompute tasks' results, joined here. Only the accelerator's part runs here;
-    :func:`encode_chunk` makes the tables on a CPU worker."""
+def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
+    """A chunk's evaluation from its :func:`join_chunk`. Only the accelerator's part
+    runs here; :func:`encode_chunk` makes the tables on a CPU worker."""
     from .pipeline import evaluate_points
 
     _setup()
     before = dict(_COUNTS)
-    joined = batches[0] if len(batches) == 1 and isinstance(batches[0], JoinedChunk) else \
-        join_chunk(job, *batches)
     t1 = time.perf_counter()
     evs = evaluate_points(joined.bakes, job.modes, tuple(COMPACT))
     S = len(job.chunk.scenes)

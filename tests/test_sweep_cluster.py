@@ -235,11 +235,10 @@ def test_no_fork_server_means_spawned_workers(monkeypatch):
         assert dask.config.get("distributed.worker.multiprocessing-method") == "spawn"
 
 
-def test_a_chunk_joined_on_a_cpu_worker_evaluates_as_one_joined_in_place(tmp_path):
-    """A sweep joins a chunk's precompute batches in a task of its own (``join_chunk``,
-    on a CPU worker) and evaluates the joined chunk; that gives the arrays of
-    ``evaluate_chunk`` joining the batches itself, with the scenes in the chunk's order,
-    padded to the chunk's shape for the program and trimmed back after."""
+def test_a_chunk_evaluates_the_same_however_its_precompute_was_split(tmp_path):
+    """``join_chunk`` (a CPU worker's task in a sweep) joins a chunk's precompute batches
+    in the chunk's order, padded to the chunk's shape; its evaluation, trimmed back to
+    the chunk's scenes, does not depend on how the scenes were split into batches."""
     from sweeps.evaluation_worker import ChunkJob, evaluate_chunk, join_chunk
     from sweeps.workers import precompute_batch
 
@@ -247,19 +246,24 @@ def test_a_chunk_joined_on_a_cpu_worker_evaluates_as_one_joined_in_place(tmp_pat
         "kind": "random", "count": 9, "tasks": [3, 4], "seed": 1}}, "<test>", str(tmp_path))
     chunk, shp = plan(cfg)[0], shapes(cfg)
     assert shp.scenes == 10  # one scene of padding
-    parts = ([0, 1, 2], [3], [4, 5, 6, 7, 8])
-    batches = [precompute_batch([cfg.random_ref(i) for i in part], [{}], str(tmp_path / "c"),
-                                shp.tasks, shp.objects) for part in parts]
     job = ChunkJob(chunk, ({},), cfg.modes, shp, ())
-    joined = join_chunk(job, *batches)
-    assert joined.bakes[0].n_scenes == shp.scenes
-    assert joined.labels["name"] == [random_scene(*cfg.random_ref(i)).name for i in range(9)]
-    assert joined.counts == {"precomputed": 9, "cache_hits": 0}
-    apart, in_place = evaluate_chunk(job, joined), evaluate_chunk(job, *batches)
-    assert apart.labels == in_place.labels and apart.counts == in_place.counts
-    for a, b in zip(apart.rollouts + apart.metrics, in_place.rollouts + in_place.metrics,
-                    strict=True):
-        assert a.keys() == b.keys()
-        for k in a:
-            assert a[k].shape[0] == 9, k
-            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+    def joined(*parts):
+        return join_chunk(job, *(precompute_batch(
+            [cfg.random_ref(i) for i in part], [{}], str(tmp_path / "c"), shp.tasks,
+            shp.objects) for part in parts))
+
+    split = joined([0, 1, 2], [3], [4, 5, 6, 7, 8])
+    whole = joined(range(9))  # from the cache the split run filled
+    assert split.bakes[0].n_scenes == shp.scenes
+    assert split.labels["name"] == [random_scene(*cfg.random_ref(i)).name for i in range(9)]
+    assert split.counts == {"precomputed": 9, "cache_hits": 0}
+    assert whole.counts == {"precomputed": 0, "cache_hits": 9}
+    a, b = evaluate_chunk(job, split), evaluate_chunk(job, whole)
+    assert a.labels == b.labels
+    for x, y in zip(a.rollouts + a.metrics, b.rollouts + b.metrics, strict=True):
+        assert x.keys() == y.keys()
+        for k in x:
+            assert x[k].shape[0] == 9, k
+            np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+
