@@ -99,9 +99,11 @@ def watch_workers(pool: Pool, where: str, say) -> Iterator[None]:
     def run() -> None:
         missing: dict[str, list] = {}  # kind -> [since, said]
         while not stop.wait(NO_WORKER_CHECK):
+            if pool.client.status != "running":  # the scheduler is gone: the sweep says so
+                return
             try:
                 workers = pool.client.scheduler_info(n_workers=-1)["workers"].values()
-            except Exception:  # the scheduler is gone: the sweep says so itself
+            except Exception:
                 return
             have = {k for w in workers for k, v in (w.get("resources") or {}).items() if v}
             now = time.monotonic()
@@ -123,7 +125,10 @@ def watch_workers(pool: Pool, where: str, say) -> Iterator[None]:
         yield
     finally:
         stop.set()
-        watcher.join()
+        # A query sent as the scheduler died waits out the client's connection timeout
+        # (60 s) before it fails; the command does not wait for it (the thread is a
+        # daemon and ends with the process).
+        watcher.join(timeout=1.0)
 
 
 def local_gpus() -> list[str]:

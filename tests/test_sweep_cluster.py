@@ -267,3 +267,39 @@ def test_a_chunk_evaluates_the_same_however_its_precompute_was_split(tmp_path):
             assert x[k].shape[0] == 9, k
             np.testing.assert_array_equal(x[k], y[k], err_msg=k)
 
+
+def test_the_worker_watch_never_holds_the_command_when_the_scheduler_is_gone(monkeypatch):
+    """A look at the workers sent just as the scheduler died waits out the client's
+    connection timeout (60 s) before it fails: the sweep, which says in one line that
+    the scheduler is lost, leaves the watch at once instead of waiting for it."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from sweeps import cluster
+
+    monkeypatch.setattr(cluster, "NO_WORKER_CHECK", 0.01)
+    asked, release = threading.Event(), threading.Event()
+
+    def scheduler_info(n_workers):
+        asked.set()
+        release.wait(30)  # a query to a scheduler that no longer answers
+        raise OSError("timed out")
+
+    client = SimpleNamespace(status="running", scheduler_info=scheduler_info)
+    pool = SimpleNamespace(client=client, precompute={"precompute": 1},
+                           evaluate={"evaluate": 1})
+    try:
+        t = time.monotonic()
+        with cluster.watch_workers(pool, "tcp://nowhere:1", print):
+            assert asked.wait(10)
+        assert time.monotonic() - t < 5
+        # Once the client knows the scheduler is gone, the watch asks nothing more.
+        release.set()
+        asked.clear()
+        client.status = "connecting"
+        with cluster.watch_workers(pool, "tcp://nowhere:1", print):
+            time.sleep(0.2)
+        assert not asked.is_set()
+    finally:
+        release.set()
