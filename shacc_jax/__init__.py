@@ -2,10 +2,14 @@
 the Automaton, batched in one jitted evaluation, :func:`evaluate`. Reads only the
 bake's arrays, by the bake's schema (never imports trimesh, manifold3d or coal)."""
 
-import jax
+from .determinism import pin_cpu_codegen
+
+pin_cpu_codegen()  # before JAX starts its CPU backend: determinism.py says why
+
+# ruff: noqa: E402
 
 from .evaluation import evaluate, evaluate_cached, evaluate_on_devices, evaluate_sharded
-from .metrics import batch_metrics as _batch_metrics
+from .metrics import host_metrics
 from .montecarlo import clutteredness_mc
 from .types import (
     ALL_MODES,
@@ -24,10 +28,7 @@ from .types import (
     inputs,
 )
 
-# Per-scene metrics of rollouts joined from pieces (sweeps.memory), as one program.
-batch_metrics = jax.jit(_batch_metrics)
-
 __all__ = ["ALL_MODES", "MODES", "OPTIMIZED", "OUTCOMES", "Evaluation", "Geometry", "Layout",
            "Params", "Rollouts", "SceneMetrics", "Search", "SearchProblem", "Spaces",
-           "batch_metrics", "clutteredness_mc", "evaluate", "evaluate_cached",
-           "evaluate_on_devices", "evaluate_sharded", "inputs"]
+           "clutteredness_mc", "evaluate", "evaluate_cached",
+           "evaluate_on_devices", "evaluate_sharded", "host_metrics", "inputs"]

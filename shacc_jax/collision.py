@@ -414,12 +414,12 @@ def object_bounds(obj_kind, obj_center, obj_quat, obj_size) -> Bounds:
     longest = jnp.argmax(obj_size, axis=-1)
     box_axis = jnp.take_along_axis(mats, longest[:, None, None], axis=2)[:, :, 0]
     box_half = jnp.max(obj_size, axis=-1)
-    box_radius = jnp.sqrt(jnp.maximum(jnp.sum(obj_size ** 2, axis=-1) - box_half ** 2, 0.0))
+    box_radius = jnp.sqrt(jnp.maximum(quat.ordered_sum(obj_size ** 2, -1) - box_half ** 2, 0.0))
     is_box = obj_kind == BOX
     half = jnp.where(is_box[:, None], box_axis * box_half[:, None],
                      mats[:, :, 2] * obj_size[:, 1:2])
     radius = jnp.where(is_box, box_radius, obj_size[:, 0])
-    sphere = jnp.where(is_box, jnp.linalg.norm(obj_size, axis=-1),
+    sphere = jnp.where(is_box, quat.norm(obj_size, -1),
                        jnp.hypot(obj_size[:, 0], obj_size[:, 1]))
     return Bounds(obj_center - half, 2.0 * half, radius, sphere)
 

@@ -22,11 +22,11 @@ ON_AXIS = 1e-9
 def frame_from_approach(a: Float[Array, "3"]) -> Float[Array, "3 3"]:
     """SPEC section 2: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;
     x = normalize(u x z); y = z x x. Columns are the EE axes."""
-    z = a / jnp.linalg.norm(a)
+    z = a / quat.norm(a)
     u = jnp.where(jnp.abs(z[2]) > 0.99, jnp.array([1.0, 0.0, 0.0], a.dtype),
                   jnp.array([0.0, 0.0, 1.0], a.dtype))
     x = jnp.cross(u, z)
-    x = x / jnp.linalg.norm(x)
+    x = x / quat.norm(x)
     y = jnp.cross(z, x)
     return jnp.stack([x, y, z], axis=1)
 

@@ -19,7 +19,34 @@ def _eps(x: Array) -> Array:
 # becomes one small library call per matrix on CPU (measured: phase 2 of the
 # Automaton went from 2.0 s to 0.1 s on the 12 manual scenes).
 def matvec(m: Array, v: Array) -> Array:
-    return jnp.sum(m * v[None, :], axis=1)
+    return jnp.stack([dot(m[i], v) for i in range(m.shape[0])])
+
+
+def ordered_sum(x: Array, axis: int = 0) -> Array:
+    """The sum over a short axis as explicit additions in index order.
+
+    Every float sum in the kernels goes through this (or :func:`dot`, :func:`norm`):
+    XLA chooses a reduction's order (and ``jnp.dot``'s, a batched matrix product)
+    from the shapes of the whole program, so a rollout's last bits would depend on
+    how many other rollouts share its call, and a sweep split into pieces by the
+    memory budget would write other numbers (measured: delta_R up to 7e-4 rad apart
+    in the shacc mode, from 1e-7 m in a projection). Written out, every rollout's
+    arithmetic is the same in any batch."""
+    x = jnp.moveaxis(x, axis, 0)
+    out = x[0]
+    for i in range(1, x.shape[0]):
+        out = out + x[i]
+    return out
+
+
+def dot(a: Array, b: Array) -> Array:
+    """<a, b> of two short vectors (:func:`ordered_sum`)."""
+    return ordered_sum(a * b)
+
+
+def norm(v: Array, axis: int = 0) -> Array:
+    """|v| over a short axis (:func:`ordered_sum`)."""
+    return jnp.sqrt(ordered_sum(v * v, axis))
 
 
 def multiply(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, "4"]:
@@ -38,7 +65,7 @@ def conjugate(q: Float[Array, "4"]) -> Float[Array, "4"]:
 
 
 def normalize(q: Float[Array, "4"]) -> Float[Array, "4"]:
-    return q / jnp.maximum(jnp.linalg.norm(q), _eps(q))
+    return q / jnp.maximum(norm(q), _eps(q))
 
 
 def to_matrix(q: Float[Array, "4"]) -> Float[Array, "3 3"]:
@@ -73,7 +100,7 @@ def from_matrix(m: Float[Array, "3 3"]) -> Float[Array, "4"]:
 
 def angle(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, ""]:
     """SPEC section 2: 2 arccos(min(1, |<a, b>|))."""
-    return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(jnp.dot(a, b))))
+    return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(dot(a, b))))
 
 
 def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
@@ -86,7 +113,7 @@ def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
     is broken towards a positive turn about the EE's x axis (v . x > 0; then y,
     then z where v . x = 0): our reading of SPEC section 9's rule.
     """
-    d = jnp.dot(q, target)
+    d = dot(q, target)
     rel = multiply(conjugate(q), target)
     v = rel[1:]
     tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
@@ -142,7 +169,7 @@ def markley_average_batch(quats: Array, weights: Array,
         return normalise(tuple(sum(e[_SLOT[i][k]] * e[_SLOT[k][j]] for k in range(4))
                                for i, j in _UPPER))
 
-    m = normalise(tuple(jnp.sum(weights * quats[i] * quats[j], axis=0) for i, j in _UPPER))
+    m = normalise(tuple(ordered_sum(weights * quats[i] * quats[j]) for i, j in _UPPER))
     # Rolled on every backend: in the batch layout of the meta targets this measured
     # 0.330 s against 0.642 s fully unrolled for 10.8 M rollouts on an H100 (every lane
     # on the Markley path), and it was already the faster form on CPU.

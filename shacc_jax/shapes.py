@@ -29,7 +29,7 @@ from . import quaternion as quat
 
 def _safe_norm(v: Array) -> Array:
     """|v| with a zero (not NaN) gradient at v = 0 (the double-where trick)."""
-    sq = jnp.sum(v * v)
+    sq = quat.dot(v, v)
     nz = sq > 0
     return jnp.where(nz, jnp.sqrt(jnp.where(nz, sq, 1.0)), 0.0)
 
@@ -281,7 +281,7 @@ def prepared_ray_interval(s: Prepared, origin: Float[Array, "3"], direction: Flo
     # coefficients then scale with the ray's distance from the shape, not from the
     # start, and their cancellation error shrinks accordingly (a float32 ray through
     # a cone's apex 0.8 m away lost its whole interval without this).
-    t0 = -jnp.dot(o, d)
+    t0 = -quat.dot(o, d)
     o = o + t0 * d
     a_c, b_c = _ray_cylinder(o, d, dims[0], dims[1], grow)
     a_k, b_k = _ray_cone(o, d, dims[0], s.trig, grow)

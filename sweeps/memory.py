@@ -27,6 +27,7 @@ import numpy as np
 import shacc_jax
 from geometry_precompute import BakedScenes, InputError
 from geometry_precompute.bake import batch_layout
+from shacc_jax.metrics import host_metrics
 from shacc_jax.types import Evaluation, Rollouts
 
 # Memory one rollout needs during evaluation (rollout outputs, the activation pass, the
@@ -41,16 +42,26 @@ BYTES_PER_ROLLOUT = {("accelerator", False): 600, ("accelerator", True): 3700,
 ENV = "SHACC_MEMORY_BUDGET"
 
 
+MAX_BUDGET = 2**60  # bytes: an exbibyte, beyond any machine
+
+
 def _parse_bytes(text: str) -> int:
+    """``SHACC_MEMORY_BUDGET``: bytes, with an optional K, M, G or T suffix (powers of
+    1024), from 1 byte to :data:`MAX_BUDGET`."""
     units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
     t = text.strip().upper().removesuffix("B")
     scale = units.get(t[-1:], 1)
+    number = t[:-1] if t[-1:] in units else t
     try:
-        value = float(t[:-1] if t[-1:] in units else t) * scale
+        value = int(number) * scale if len(number) <= 30 else -1
     except ValueError:
-        value = -1
-    if not value >= 1:
-        raise InputError(f"${ENV}", ENV, f"must be a number of bytes such as 2G, got {text!r}")
+        try:
+            value = float(number) * scale
+        except (ValueError, OverflowError):
+            value = -1
+    if not 1 <= value <= MAX_BUDGET:  # NaN, inf and 400-digit numbers fail here too
+        raise InputError(f"${ENV}", ENV, f"must be a number of bytes from 1 to 2^60 such as "
+                         f"2G, got {text[:40]!r}")
     return int(value)
 
 
@@ -128,27 +139,31 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
     lead = 0 if params is None else 1  # a points axis before the scenes axis
     collision = bool(np.any(baked.collision if params is None else stacked.collision))
     per_start = bytes_needed(S, 1, T, M, collision) * P
-    if per_start * N <= limit:
-        return jax.tree.map(np.asarray, evaluate(baked))
-    n_per = limit // per_start
-    if n_per < 1:
-        raise InputError("<memory>", "batch", f"one start pose of this batch ({P} x {S} "
-                         f"scenes x {T} tasks x {M} modes) needs {_size(per_start)}, more than the "
-                         f"budget of {_size(limit)}; evaluate fewer scenes at once or raise "
-                         f"${ENV}")
-    pieces = []
-    for a in range(0, N, n_per):
-        idx = np.minimum(np.arange(a, a + n_per), N - 1)  # the last piece padded: one shape
-        out = evaluate(replace(baked, starts=baked.starts[:, idx]))
-        keep = min(n_per, N - a)
-        pieces.append([None if x is None else np.take(np.asarray(x), np.arange(keep),
-                                                      axis=2 + lead) for x in out.rollouts])
-    rollouts = Rollouts(*(None if parts[0] is None else np.concatenate(parts, axis=2 + lead)
-                          for parts in zip(*pieces, strict=True)))
-    if lead:  # the points as more scenes
-        flat = [r.reshape(P * S, *r.shape[2:]) for r in (rollouts.outcome, rollouts.delta_R)]
-        metrics = shacc_jax.batch_metrics(*flat, np.tile(baked.task_mask, (P, 1)))
-        metrics = jax.tree.map(lambda a: np.asarray(a).reshape(P, S, *a.shape[1:]), metrics)
+    # At least two starts in every program, even a one-start grid (padded by repeating
+    # it): where an axis has length one, XLA simplifies the arithmetic around it
+    # differently, and a rollout's last bits would depend on its piece
+    # (shacc_jax/determinism.py).
+    n_per = N if per_start * N <= limit and N >= 2 else limit // per_start
+    if n_per < 2:
+        raise InputError("<memory>", "batch", f"two start poses of this batch ({P} x {S} "
+                         f"scenes x {T} tasks x {M} modes) need {_size(2 * per_start)}, more "
+                         f"than the budget of {_size(limit)}; evaluate fewer scenes at once "
+                         f"or raise ${ENV}")
+    if n_per >= N:
+        rollouts = jax.tree.map(np.asarray, evaluate(baked)).rollouts
     else:
-        metrics = shacc_jax.batch_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask)
-    return Evaluation(rollouts, jax.tree.map(np.asarray, metrics))
+        pieces = []
+        for a in range(0, N, n_per):
+            idx = np.minimum(np.arange(a, a + n_per), N - 1)  # last piece padded: one shape
+            out = evaluate(replace(baked, starts=baked.starts[:, idx]))
+            keep = min(n_per, N - a)
+            pieces.append([None if x is None else np.take(np.asarray(x), np.arange(keep),
+                                                          axis=2 + lead)
+                           for x in out.rollouts])
+        rollouts = Rollouts(*(None if parts[0] is None else
+                              np.concatenate(parts, axis=2 + lead)
+                              for parts in zip(*pieces, strict=True)))
+    # Metrics once, in double precision, over the joined rollouts: the same numbers
+    # whether the batch ran in one piece or several (shacc_jax.metrics).
+    return Evaluation(rollouts, host_metrics(rollouts.outcome, rollouts.delta_R,
+                                             baked.task_mask))

@@ -182,8 +182,9 @@ def test_budget_from_the_environment_splits_evaluate(monkeypatch):
 def test_one_start_that_does_not_fit_says_how_much_it_needs(monkeypatch):
     r = precompute(load_scene(SCENE))
     monkeypatch.setenv("SHACC_MEMORY_BUDGET", "1K")
-    need = f"{bytes_per_rollout(False) * 3 * 3 / 1024:.1f}".replace(".", r"\.")
-    with pytest.raises(InputError, match=rf"needs {need} KB, more than the budget of 1\.0 KB"):
+    need = f"{2 * bytes_per_rollout(False) * 3 * 3 / 1024:.1f}".replace(".", r"\.")
+    with pytest.raises(InputError, match=rf"two start poses .* need {need} KB, more than the "
+                       r"budget of 1\.0 KB"):
         evaluate_results([r])
     monkeypatch.setenv("SHACC_MEMORY_BUDGET", "lots")
     with pytest.raises(InputError, match="SHACC_MEMORY_BUDGET"):

@@ -1,0 +1,125 @@
+"""A rollout's numbers do not depend on the batch it is evaluated in
+(shacc_jax/determinism.py): any split of the start grid or of the scenes gives the
+same bits, and so a sweep's tables are the same whatever the memory budget and
+however it was resumed."""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import shacc_jax
+from geometry_precompute import DEFAULTS, bake, precompute, random_scene
+from sweeps import memory
+from sweeps.config import parse_config
+from sweeps.runner import run_sweep
+
+
+def _run(baked):
+    """The rollouts of a bake, by the door the command line uses (so that the tests
+    below share its compiled programs)."""
+    return shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked)).rollouts
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.fixture(scope="module")
+def batch():
+    scenes = [random_scene(40 + i, ("uniform", "gaussian")[i % 2], 3, 8) for i in range(5)]
+    return bake([precompute(s, s.settings(DEFAULTS, {"start_grid": [4, 3], "v_max": 0.4}))
+                 for s in scenes])
+
+
+def test_any_split_of_the_start_grid_gives_the_same_bits(batch):
+    whole = _run(batch)
+    N = batch.n_starts
+    for size in (2, 5):  # pieces of 2 and 5 (the last one of 2): the shapes below
+        for a in range(0, N - 1, size):
+            idx = np.arange(a, min(a + size, N))
+            part = _run(replace(batch, starts=batch.starts[:, idx]))
+            for name in whole._fields:
+                assert _same_bits(np.take(getattr(whole, name), idx, axis=2),
+                                  getattr(part, name)), (name, size, a)
+
+
+def test_any_split_of_the_scenes_gives_the_same_bits(batch):
+    whole = _run(batch)
+    results = [precompute(random_scene(40 + i, ("uniform", "gaussian")[i % 2], 3, 8),
+                          {"start_grid": [4, 3], "v_max": 0.4}) for i in range(5)]
+    for lo, hi in ((0, 2), (2, 5), (1, 3)):
+        part = _run(bake(results[lo:hi], batch.n_tasks, max_objects=batch.obj_mask.shape[1]))
+        for name in whole._fields:
+            assert _same_bits(getattr(whole, name)[lo:hi], getattr(part, name)), (name, lo)
+
+
+def test_pieces_of_the_memory_budget_give_the_same_bits_and_metrics(batch):
+    modes = shacc_jax.MODES
+    whole = memory.evaluate_in_pieces(batch, modes, limit=10**12)
+    per_start = memory.bytes_needed(batch.n_scenes, 1, batch.n_tasks, len(modes))
+    for starts in (2, 5):
+        pieces = memory.evaluate_in_pieces(batch, modes, limit=starts * per_start)
+        for a, b in zip(whole, pieces, strict=True):
+            for x, y in zip(a, b, strict=True):
+                assert _same_bits(x, y)
+    # Rates are exact fractions of the counts, in double precision.
+    m = whole.metrics
+    assert m.u_scene.dtype == np.float64
+    np.testing.assert_array_equal(m.u_scene, m.outcome_counts[..., 0] / m.n_rollouts)
+
+
+SWEEP = """
+name = "budget"
+chunk = 2
+[source]
+kind = "random"
+count = 5
+tasks = [3, 6]
+seed = 11
+[settings]
+start_grid = [4, 2]
+[axes]
+v_max = [0.15, 0.5]
+"""
+
+
+def _tables(out: Path) -> dict:
+    """Every column of both tables, as the bytes of its values (NaN is NaN)."""
+    found = {}
+    for name in ("scenes", "rollouts"):
+        table = pq.read_table(out / name)
+        for col in table.column_names:
+            values = table[col].combine_chunks()
+            if hasattr(values, "dictionary"):
+                values = values.dictionary_decode()
+            array = values.to_numpy(zero_copy_only=False)
+            found[(name, col)] = array.tolist() if array.dtype == object else array.tobytes()
+    return found
+
+
+def test_sweep_tables_are_the_same_bits_whatever_the_budget_and_resume(tmp_path, monkeypatch):
+    cfg = parse_config(__import__("tomllib").loads(SWEEP), "budget.toml", tmp_path)
+    cache = tmp_path / "cache"
+    run_sweep(cfg, tmp_path / "whole", cache, workers=1, progress=False)
+    # A rollout needs 1 300 bytes on a CPU: 2 x 2 scenes x 6 tasks x 3 modes x 2 starts.
+    monkeypatch.setenv("SHACC_MEMORY_BUDGET", str(2 * 2 * 6 * 3 * 2 * 1300))
+    run_sweep(cfg, tmp_path / "pieces", cache, workers=1, progress=False)
+    # Resumed under another budget: the last two chunks removed, then written again.
+    resumed = tmp_path / "resumed"
+    shutil.copytree(tmp_path / "pieces", resumed)
+    parts = sorted((resumed / "scenes").glob("part-*.parquet"))
+    for p in parts[-2:]:
+        p.unlink()
+        (resumed / "rollouts" / p.name).unlink()
+    monkeypatch.setenv("SHACC_MEMORY_BUDGET", str(3 * 2 * 6 * 3 * 2 * 1300))
+    run_sweep(cfg, resumed, cache, workers=1, progress=False)
+    whole = _tables(tmp_path / "whole")
+    assert _tables(tmp_path / "pieces") == whole
+    assert _tables(resumed) == whole
