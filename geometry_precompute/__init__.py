@@ -1,21 +1,62 @@
 """CPU half of the ShaCC evaluator: scenes, templates, meshes, clutteredness,
-clusters, Shrinking and the bake (never imports jax)."""
+clusters, Shrinking and the bake (never imports jax).
 
-from importlib.resources import files
+The names below are loaded when first used (PEP 562), so that importing one light
+module of the package (``errors``, ``fileio``, ``schema``) does not import NumPy and
+the scene model: the command line reads its arguments, and starts its workers, before
+it needs them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import types
 from pathlib import Path
 
-from .bake import BakedScenes, bake
-from .errors import InputError
-from .generate import random_scene
-from .loading import load_scene, scene_from_dict
-from .precompute import PrecomputeResult, precompute
-from .scene import Scene, save_scene
-from .settings import DEFAULTS, SPECS, Settings
+_WHERE = {
+    "BakedScenes": "bake", "bake": "bake",
+    "HostError": "errors", "InputError": "errors",
+    "random_scene": "generate",
+    "load_scene": "loading", "scene_from_dict": "loading",
+    "PrecomputeResult": "precompute", "precompute": "precompute",
+    "Scene": "scene", "save_scene": "scene",
+    "DEFAULTS": "settings", "SPECS": "settings", "Settings": "settings",
+}
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_WHERE})
+
+
+class _Package(types.ModuleType):
+    """Two modules share a name with the function they define (``bake``,
+    ``precompute``); importing the module must not hide the function, as Python's
+    import would by setting the package's attribute to the module."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in _WHERE and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
 
 
 def shipped_scene_paths() -> list[Path]:
     """The manual scenes that ship with the package, in file-name order: the twelve of
     the paper's experiment (``reproduce`` uses these), not the ``extra`` ones."""
+    from importlib.resources import files
+
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes").iterdir()
                   if str(p).endswith(".toml"))
 
@@ -23,10 +64,12 @@ def shipped_scene_paths() -> list[Path]:
 def extra_scene_paths() -> list[Path]:
     """Scenes that ship beside the paper's twelve (``scenes/extra``), for cases those do
     not cover: a cluster that mixes a top grasp with side grasps."""
+    from importlib.resources import files
+
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes", "extra").iterdir()
                   if str(p).endswith(".toml"))
 
 
-__all__ = ["DEFAULTS", "SPECS", "BakedScenes", "InputError", "PrecomputeResult", "Scene",
-           "Settings", "bake", "extra_scene_paths", "load_scene", "precompute", "random_scene",
-           "save_scene", "scene_from_dict", "shipped_scene_paths"]
+__all__ = ["DEFAULTS", "SPECS", "BakedScenes", "HostError", "InputError", "PrecomputeResult",
+           "Scene", "Settings", "bake", "extra_scene_paths", "load_scene", "precompute",
+           "random_scene", "save_scene", "scene_from_dict", "shipped_scene_paths"]

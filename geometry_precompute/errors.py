@@ -1,23 +1,77 @@
-"""The one error type for bad input (SPEC section 13).
+"""The two kinds of fault a user can cause or meet, each one line.
 
-Every loader and public function raises :class:`InputError` for input it
-rejects. The message always names the source (a file, or "<settings>" /
-"<argument>" for values that came from elsewhere), the field and the rule,
-so the command line can print it as one line and exit non-zero.
+- :class:`InputError`: bad input (SPEC section 13). Every loader and public function
+  raises it for input it rejects; the message names the source (a file, or
+  "<settings>" / "<arguments>" for values that came from elsewhere), the field and
+  the rule. The command line prints it and exits with status 2.
+- :class:`HostError`: a fault of the machine rather than of the input: a full disk,
+  a read-only or unreadable path, a folder where a file belongs. The message names
+  the path, what could not be done and the operating system's reason. The command
+  line prints it and exits with status 1.
+
+Both messages are one line whatever they quote: control characters (a newline in an
+id, say) are shown escaped, and very long quotes are cut (:func:`one_line`).
 """
 
 from __future__ import annotations
+
+import reprlib
+
+MAX_LINE = 600  # characters of one message; longer quotes are cut with "..."
+
+_SHORT = reprlib.Repr()
+_SHORT.maxstring = 80
+_SHORT.maxother = 80
+_SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxdict = 6
+_SHORT.maxlevel = 3
+
+
+def shown(value) -> str:
+    """A value as an error message quotes it: short, and safe for any nesting."""
+    return _SHORT.repr(value)
+
+
+def one_line(text: str, limit: int = MAX_LINE) -> str:
+    """``text`` with every control character escaped (``\\n``, ``\\x1b``), cut to
+    ``limit`` characters."""
+    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return out if len(out) <= limit else out[:limit - 3] + "..."
 
 
 class InputError(ValueError):
     """Bad input: ``source: field: rule``."""
 
     def __init__(self, source: str, field: str, rule: str):
-        self.source = str(source)
-        self.field = field
-        self.rule = rule
-        super().__init__(f"{self.source}: {field}: {rule}")
+        self.source = one_line(source, 200)
+        self.field = one_line(field, 200)
+        self.rule = one_line(rule)
+        super().__init__(f"{self.source}: {self.field}: {self.rule}")
 
     def __reduce__(self):
         # Raised in a worker process, it travels back to the command whole.
         return (type(self), (self.source, self.field, self.rule))
+
+
+class HostError(OSError):
+    """The machine refused: ``path: cannot <action> (<reason>)``."""
+
+    def __init__(self, path, action: str, reason: str):
+        self.path = one_line(str(path), 300)
+        self.action = action
+        self.reason = one_line(reason, 200)
+        super().__init__(f"{self.path}: cannot {action} ({self.reason})")
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.action, self.reason))
+
+    @classmethod
+    def of(cls, error: OSError, path, action: str) -> HostError:
+        """The :class:`HostError` of an ``OSError`` met while doing ``action`` on
+        ``path`` (its own file name wins where it has one)."""
+        if isinstance(error, HostError):
+            return error
+        where = error.filename if error.filename is not None else path
+        return cls(where, action, error.strerror or type(error).__name__)

@@ -17,13 +17,13 @@ a library user who never calls it traces as usual.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import jax
 from jax import export
+
+from geometry_precompute.fileio import seal, unseal, write_atomic
 
 _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
@@ -87,10 +87,14 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
     if run is None:
         path = _DIR / f"export-{name}-{key}.bin"
         exp = None
-        if path.exists():
+        try:
+            payload = unseal(key, path.read_bytes())
+        except OSError:
+            payload = None
+        if payload is not None:  # whole, and written for this key (fileio.seal)
             try:
-                exp = export.deserialize(bytearray(path.read_bytes()))
-            except Exception:  # a damaged or foreign entry is rebuilt
+                exp = export.deserialize(bytearray(payload))
+            except Exception:  # written by another jax: rebuilt
                 exp = None
         if exp is None:
             def flat(*xs):
@@ -99,22 +103,13 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
 
             specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
             exp = export.export(jax.jit(flat))(*specs)
-            _store(path, exp.serialize())
+            _store(path, seal(key, bytes(exp.serialize())))
         run = _LOADED[key] = jax.jit(exp.call)
     return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
 
 
 def _store(path: Path, data: bytes) -> None:
-    tmp = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            mask = os.umask(0)
-            os.umask(mask)
-            os.fchmod(f.fileno(), 0o666 & ~mask)  # readable as the user's umask says
-        os.replace(tmp, path)
+        write_atomic(path, data)
     except OSError:  # an unwritable cache costs time on the next run, never this one
-        if tmp is not None:
-            Path(tmp).unlink(missing_ok=True)
+        pass

@@ -31,6 +31,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from geometry_precompute.fileio import cache_home, seal, unseal, write_atomic
+
 ENV = "SHACC_COMPILE_CACHE"
 
 
@@ -41,8 +43,37 @@ def cache_dir() -> Path | None:
         return None
     if value:
         return Path(value).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "shacc" / "compiled"
+    return cache_home() / "compiled"
+
+
+def _verified_xla_cache(folder: Path):
+    """JAX's persistent cache with every entry sealed (``fileio.seal``): a truncated
+    entry, or another program's entry under this name, is a miss (compiled again),
+    never loaded. JAX itself loads whatever file bears the name (its documentation:
+    the cache is trusted). Installed through JAX's internal cache slot; where a JAX
+    release has none, its own cache is used unverified."""
+    from jax._src import compilation_cache as cc
+    from jax._src.compilation_cache_interface import CacheInterface
+
+    class VerifiedCache(CacheInterface):
+        def __init__(self, path: Path):
+            self._path = path
+
+        def get(self, key: str) -> bytes | None:
+            try:
+                return unseal(key, (self._path / f"{key}-sealed").read_bytes())
+            except OSError:
+                return None
+
+        def put(self, key: str, value: bytes) -> None:
+            try:
+                write_atomic(self._path / f"{key}-sealed", seal(key, value))
+            except OSError:  # an unwritable cache costs time later, never this run
+                pass
+
+    with cc._cache_initialized_mutex:
+        cc._cache = VerifiedCache(folder)
+        cc._cache_initialized = True
 
 
 LOCATIONS_ENV = "JAX_TRACEBACK_IN_LOCATIONS_LIMIT"
@@ -78,5 +109,9 @@ def enable() -> Path | None:
     # Cache every program, however quick to compile: the small ones add up.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    try:
+        _verified_xla_cache(path / "xla")
+    except (ImportError, AttributeError):
+        pass
     program_cache.set_dir(path / "programs")
     return path

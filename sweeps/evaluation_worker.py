@@ -47,6 +47,7 @@ class ChunkResult:
     n_rollouts: int
     precomputed: int               # scenes precomputed (not read from a cache)
     cache_hits: int
+    cache_warning: str | None      # why the precompute cache could not be written
     seconds: dict = field(default_factory=dict)  # busy time: precompute (its tasks, bake
     #                                              included), join, evaluate, tables
     compiled: int = 0              # programs XLA built for this chunk
@@ -210,7 +211,9 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
     labels = {k: [x for b in batches for x in b.scenes[k]] for k in batches[0].scenes}
     return JoinedChunk(bakes, labels,
                        {"precomputed": sum(b.precomputed for b in batches),
-                        "cache_hits": sum(b.cache_hits for b in batches)},
+                        "cache_hits": sum(b.cache_hits for b in batches),
+                        "cache_warning": next((b.cache_warning for b in batches
+                                               if b.cache_warning), None)},
                        {"precompute": sum(b.seconds for b in batches),
                         "join": time.perf_counter() - t0})
 
@@ -255,5 +258,6 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
     out_s, out_r = tables.parquet_bytes(scenes_t), tables.parquet_bytes(rollouts_t)
     return ChunkResult(job.chunk.index, out_s, out_r, scenes_t.num_rows, rollouts_t.num_rows,
                        arrays.counts["precomputed"], arrays.counts["cache_hits"],
+                       arrays.counts["cache_warning"],
                        {**arrays.seconds, "tables": time.perf_counter() - t0},
                        arrays.compiled, arrays.loaded, arrays.worker)

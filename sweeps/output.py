@@ -8,11 +8,11 @@ import json
 import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from geometry_precompute import InputError
+from geometry_precompute import HostError, InputError
+from geometry_precompute.fileio import COMMIT, write_atomic
 from geometry_precompute.precompute import PrecomputeResult
 
 
@@ -80,53 +80,20 @@ def check_output_dir(path: str | Path, option: str, own: tuple[str, ...] = ()) -
     return path
 
 
-def _umask() -> int:
-    mask = os.umask(0)  # the only way to read it; set straight back
-    os.umask(mask)
-    return mask
-
-
-def write_atomic(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` as a file should be written.
-
-    - a regular file (or a new name) is written to a temporary file beside it and
-      renamed over it, so a reader never sees half of it; it gets the mode the user's
-      umask gives a new file (not the temporary file's 0600);
-    - a symbolic link is followed: its target is written, the link stays;
-    - anything else that exists (a named pipe, a device such as /dev/null, a process
-      substitution's /dev/fd/N) is opened and written directly: it cannot be renamed
-      over, and its reader is waiting on it.
-    """
-    path = Path(path)
-    if path.is_symlink():
-        path = path.resolve()
-    if path.exists() and not path.is_file():
-        if path.is_dir():
-            raise InputError(path, "<file>", "is a folder, expected a file name")
-        with path.open("wb") as f:
-            f.write(data)
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-            os.fchmod(f.fileno(), 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_output(path: str | Path, data: bytes) -> None:
     """A command's ``--json`` output: ``-`` is standard output, else :func:`write_atomic`
     (announced on stderr, which keeps stdout for results)."""
     if str(path) == "-":
-        sys.stdout.flush()
-        sys.stdout.buffer.write(data)
-        sys.stdout.flush()
+        # Whole, before a Ctrl-C ends the command (fileio.COMMIT), or not at all.
+        with COMMIT:
+            try:
+                sys.stdout.flush()
+                sys.stdout.buffer.write(data)
+                sys.stdout.flush()
+            except BrokenPipeError:
+                raise
+            except OSError as e:
+                raise HostError("<stdout>", "write", e.strerror or type(e).__name__) from None
         return
     write_atomic(path, data)
 

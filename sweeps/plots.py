@@ -18,8 +18,18 @@ OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # succ
 
 
 def _save(fig, path):
+    """Write the figure to ``path`` (PNG unless its suffix says otherwise), atomically
+    (``fileio.write_atomic``): a full disk or Ctrl-C leaves no half picture."""
     if path is not None:
-        fig.savefig(path, dpi=110, bbox_inches="tight")
+        import io
+        from pathlib import Path
+
+        from geometry_precompute.fileio import write_atomic
+
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=110, bbox_inches="tight",
+                    format=Path(path).suffix.lstrip(".").lower() or "png")
+        write_atomic(path, buf.getvalue())
     return fig
 
 

@@ -16,11 +16,9 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import hashlib
 import json
 import multiprocessing
 import os
-import pickle
 import signal
 import sys
 import time
@@ -29,11 +27,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from geometry_precompute import DEFAULTS, bake, load_scene, precompute, random_scene
-from geometry_precompute.generate import GENERATOR_VERSION
-from geometry_precompute.precompute import PRECOMPUTE_VERSION, PrecomputeResult
-from geometry_precompute.scene import Scene, scene_to_dict
-
-from .output import write_atomic
+from geometry_precompute.cache import cached, default_folder
+from geometry_precompute.precompute import PrecomputeResult
+from geometry_precompute.scene import Scene
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
@@ -51,6 +47,9 @@ def _worker_setup(parent: int) -> None:
 def precompute_pool(workers: int | None):
     """A process pool that, on any exception (Ctrl-C included), drops its queued tasks
     and waits only for the running ones, so no worker outlives the command."""
+    from .interrupt import start_resource_tracker
+
+    start_resource_tracker()  # the workers are spawned with SIGINT blocked (interrupt.py)
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_setup, initargs=(os.getpid(),))
     try:
@@ -59,56 +58,6 @@ def precompute_pool(workers: int | None):
         pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
-
-
-def cache_key(scene: Scene, settings) -> str:
-    """The precompute cache's key: the scene, its precompute-stage settings and the
-    precompute's version (a rollout setting never triggers a new precompute)."""
-    blob = json.dumps({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute"),
-                       "version": PRECOMPUTE_VERSION}, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()
-
-
-def precompute_cached(args) -> tuple[PrecomputeResult, bool]:
-    """(result, whether it came from the cache) of (scene, overrides, cache folder)."""
-    scene, overrides, cache = args
-    return _cached(scene, scene.settings(DEFAULTS, overrides), Path(cache))
-
-
-def random_key(ref: tuple, settings) -> str:
-    """The cache key of a random scene: ``random_scene``'s arguments, the generator's
-    version, the precompute-stage settings and the precompute's version. A warm sweep
-    of random scenes then reads its results without building the scenes (1.7 ms a
-    scene, about what reading a result costs)."""
-    blob = json.dumps({"random": list(ref), "generator": GENERATOR_VERSION,
-                       "settings": settings.by_stage("precompute"),
-                       "version": PRECOMPUTE_VERSION}, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()
-
-
-def _cached(scene: Scene | tuple, settings, cache: Path) -> tuple[PrecomputeResult, bool]:
-    """(result, from the cache) of a Scene, or of ``random_scene``'s arguments (the
-    scene is built only when its result is not cached)."""
-    random = not isinstance(scene, Scene)
-    key = random_key(scene, settings) if random else cache_key(scene, settings)
-    path = cache / f"{key}.pkl"
-    if path.exists():
-        try:
-            with path.open("rb") as f:
-                r = pickle.load(f)
-            return replace(r, settings=settings), True
-        except (OSError, pickle.UnpicklingError, EOFError):
-            pass  # a damaged entry is recomputed and rewritten
-    r = precompute(random_scene(*scene) if random else scene, settings)
-    write_atomic(path, pickle.dumps(r))
-    return r, False
-
-
-def default_cache() -> Path:
-    """The precompute cache of this host: ``$XDG_CACHE_HOME/shacc/precompute``
-    (``~/.cache/shacc/precompute`` when it is unset)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "shacc" / "precompute"
 
 
 @dataclass(frozen=True)
@@ -121,6 +70,7 @@ class Batch:
     precomputed: int     # scenes computed here (the others came from the cache)
     cache_hits: int
     seconds: float
+    cache_warning: str | None = None  # why results could not be stored, if they could not
 
 
 def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
@@ -129,16 +79,19 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
     ``random_scene``'s arguments (the scene is built here); ``points``: the overrides of
     the group's sweep points (they differ only in rollout settings, so the first one's
     precompute serves all); ``cache``: the cache folder on this worker's host (None:
-    the host's default, :func:`default_cache`). The scenes are precomputed (or read
+    the host's default, ``cache.default_folder``). The scenes are precomputed (or read
     from the cache) and baked here, spreading the bake over every CPU of the cluster;
     only arrays travel on."""
     t0 = time.perf_counter()
-    folder = Path(cache) if cache else default_cache()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = Path(cache) if cache else default_folder()
     settings = point_settings(points)
-    got = [_cached(ref, settings(ref if isinstance(ref, Scene) else None, 0), folder)
-           for ref in refs]
-    return bake_batch(got, points, tasks, objects, time.perf_counter() - t0, settings)
+    got, warning = [], None
+    for ref in refs:
+        r, hit, why = cached(ref, settings(ref if isinstance(ref, Scene) else None, 0), folder)
+        got.append((r, hit))
+        warning = warning or why
+    batch = bake_batch(got, points, tasks, objects, time.perf_counter() - t0, settings)
+    return replace(batch, cache_warning=warning)
 
 
 def point_settings(points: list[dict]):

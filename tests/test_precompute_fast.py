@@ -232,12 +232,12 @@ def recorded():
 
 def test_cache_key_names_the_precompute_version(monkeypatch):
     """Results cached before the fast volumes are computed again, not mixed in."""
-    import sweeps.workers as workers
+    import geometry_precompute.cache as cache
 
     sc = random_scene(3, "uniform", 3, 3)
-    key = workers.cache_key(sc, DEFAULTS)
-    monkeypatch.setattr(workers, "PRECOMPUTE_VERSION", 1)
-    assert workers.cache_key(sc, DEFAULTS) != key
+    key = cache.scene_key(sc, DEFAULTS)
+    monkeypatch.setattr(cache, "PRECOMPUTE_VERSION", 1)
+    assert cache.scene_key(sc, DEFAULTS) != key
 
 
 def test_generator_output_is_the_versioned_one():
@@ -258,21 +258,21 @@ def test_random_scenes_are_cached_by_their_arguments(tmp_path, monkeypatch):
     """A warm cache answers a random scene's arguments without building the scene, with
     the result of the scene those arguments give; the key names the generator's and the
     precompute's versions and the precompute settings."""
-    import sweeps.workers as workers
+    import geometry_precompute.cache as cache
 
     ref = (7, "gaussian", 4, 6)
-    first, hit = workers._cached(ref, DEFAULTS, tmp_path)
+    first, hit, _ = cache.cached(ref, DEFAULTS, tmp_path)
     assert not hit
-    monkeypatch.setattr(workers, "random_scene", None)  # building a scene would fail now
-    again, hit = workers._cached(ref, DEFAULTS, tmp_path)
+    monkeypatch.setattr(cache, "random_scene", None)  # building a scene would fail now
+    again, hit, _ = cache.cached(ref, DEFAULTS, tmp_path)
     assert hit and again.scene == random_scene(*ref) == first.scene
     assert [list(map(float, q)) for q in again.q_opt] == [list(map(float, q)) for q in first.q_opt]
     assert again.C_final == first.C_final
-    key = workers.random_key(ref, DEFAULTS)
-    assert workers.random_key(ref, DEFAULTS.with_overrides({"shrink_step": 0.004})) != key
-    assert workers.random_key(ref, DEFAULTS.with_overrides({"v_max": 0.1})) == key
-    monkeypatch.setattr(workers, "GENERATOR_VERSION", 0)
-    assert workers.random_key(ref, DEFAULTS) != key
+    key = cache.random_key(ref, DEFAULTS)
+    assert cache.random_key(ref, DEFAULTS.with_overrides({"shrink_step": 0.004})) != key
+    assert cache.random_key(ref, DEFAULTS.with_overrides({"v_max": 0.1})) == key
+    monkeypatch.setattr(cache, "GENERATOR_VERSION", 0)
+    assert cache.random_key(ref, DEFAULTS) != key
 
 
 def test_recorded_scenes_cover_the_set(recorded):
