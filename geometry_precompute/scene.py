@@ -24,7 +24,8 @@ from typing import Any
 
 import tomli_w
 
-from .errors import InputError
+from .errors import InputError, shown
+from .fileio import MAX_DEPTH, check_depth, read_bytes_limited, write_atomic
 from .settings import (
     COORD_LIMIT,
     DEFAULTS,
@@ -125,27 +126,38 @@ _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 def _number(value: Any, src: str, fld: str, positive: bool = False,
             limit: float = COORD_LIMIT) -> float:
     """A finite number; a size (``positive``) in (0, LENGTH_LIMIT], anything else within
-    ``limit`` of zero (settings.py says why every number has a range)."""
+    ``limit`` of zero (settings.py says why every number has a range). Integers are
+    range-checked before they become floats (one beyond 64 bits cannot)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(src, fld, f"must be a number, got {value!r}")
-    if not math.isfinite(value):
+        raise InputError(src, fld, f"must be a number, got {shown(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
         raise InputError(src, fld, "must be finite (no NaN or inf)")
     if positive and not 0 < value <= LENGTH_LIMIT:
-        raise InputError(src, fld, f"must be > 0 and at most {LENGTH_LIMIT:g} m, got {value!r}")
+        raise InputError(src, fld, f"must be > 0 and at most {LENGTH_LIMIT:g} m, got "
+                         f"{shown(value)}")
     if not positive and abs(value) > limit:
-        raise InputError(src, fld, f"must be within [-{limit:g}, {limit:g}], got {value!r}")
+        raise InputError(src, fld, f"must be within [-{limit:g}, {limit:g}], got {shown(value)}")
     return float(value)
 
 
 def _vector(value: Any, n: int, src: str, fld: str, positive: bool = False) -> tuple:
     if not isinstance(value, list | tuple) or len(value) != n:
-        raise InputError(src, fld, f"must be a list of {n} numbers, got {value!r}")
+        raise InputError(src, fld, f"must be a list of {n} numbers, got {shown(value)}")
     return tuple(_number(v, src, f"{fld}[{i}]", positive) for i, v in enumerate(value))
 
 
+ID_LIMIT = 200  # characters of an id or a name
+
+
 def _string(value: Any, src: str, fld: str) -> str:
+    """A non-empty line of text: an id, a name, a kind (no control characters, so that
+    every message quoting it stays one line)."""
     if not isinstance(value, str) or not value.strip():
-        raise InputError(src, fld, f"must be a non-empty string, got {value!r}")
+        raise InputError(src, fld, f"must be a non-empty string, got {shown(value)}")
+    if not value.isprintable():
+        raise InputError(src, fld, f"must be one line of printable text, got {shown(value)}")
+    if len(value) > ID_LIMIT:
+        raise InputError(src, fld, f"must be at most {ID_LIMIT} characters, got {len(value)}")
     return value
 
 
@@ -166,8 +178,8 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
     oid = _string(raw["id"], src, where + "id")
     where = f"objects[{oid}]."
     kind = raw["kind"]
-    if kind not in OBJECT_KINDS:
-        raise InputError(src, where + "kind", f"unknown object kind {kind!r} "
+    if not isinstance(kind, str) or kind not in OBJECT_KINDS:
+        raise InputError(src, where + "kind", f"unknown object kind {shown(kind)} "
                          f"(known: {', '.join(OBJECT_KINDS)})")
     position = _vector(raw["position"], 3, src, where + "position")
     yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
@@ -195,8 +207,8 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
     where = f"tasks[{tid}]."
     obj_id = _string(raw["object"], src, where + "object")
     template = raw["template"]
-    if template not in TEMPLATE_OBJECTS:
-        raise InputError(src, where + "template", f"unknown template {template!r} "
+    if not isinstance(template, str) or template not in TEMPLATE_OBJECTS:
+        raise InputError(src, where + "template", f"unknown template {shown(template)} "
                          f"(known: {', '.join(TEMPLATE_OBJECTS)})")
     if obj_id not in objects:
         raise InputError(src, where + "object", f"no object with id {obj_id!r} in the scene")
@@ -223,11 +235,12 @@ def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
     """Validate a parsed scene table's names, types, ranges and references (SPEC
     sections 3 and 13) and build a Scene."""
     src = str(source)
+    check_depth(data, src)
     _check_keys(data, _TOP_KEYS, {"name"}, src, "")
     name = _string(data["name"], src, "name")
     description = data.get("description", "")
-    if not isinstance(description, str):
-        raise InputError(src, "description", "must be a string")
+    if not isinstance(description, str) or not description.isprintable():
+        raise InputError(src, "description", "must be one line of printable text")
     raw_objects = data.get("objects", [])
     raw_tasks = data.get("tasks", [])
     if not isinstance(raw_objects, list) or not raw_objects:
@@ -261,26 +274,23 @@ class SceneWarning(UserWarning):
 
 
 def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
-    """Parse a TOML file; anything that is not one (missing, a folder, unreadable, not
-    UTF-8 text, bad syntax) is an InputError naming the file, never a traceback."""
+    """Parse a TOML file; anything that is not one (missing, a folder, unreadable,
+    larger than ``fileio.MAX_TEXT_BYTES``, not UTF-8 text, bad syntax, nested deeper than
+    ``fileio.MAX_DEPTH``) is an InputError naming the file, never a traceback."""
     path = Path(path)
+    data = read_bytes_limited(path, what)
     try:
-        return tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise InputError(path, "<file>", f"no such file (expected {what})") from None
-    except IsADirectoryError:
-        raise InputError(path, "<file>", f"is a folder, expected {what}") from None
-    except NotADirectoryError:
-        raise InputError(path, "<file>", "a part of the path is a file, not a folder") from None
-    except PermissionError:
-        raise InputError(path, "<file>", "cannot be read (permission denied)") from None
-    except OSError as e:
-        raise InputError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
+        parsed = tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as e:
         raise InputError(path, "<file>", f"is not UTF-8 text (byte {e.start}); expected "
                          f"{what}") from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
+    except RecursionError:
+        raise InputError(path, "<nesting>", f"tables and arrays nested deeper than "
+                         f"{MAX_DEPTH} levels") from None
+    check_depth(parsed, str(path))
+    return parsed
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:
@@ -317,8 +327,5 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
-    """Write ``scene`` as TOML; written to a temporary file first, then renamed."""
-    path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_bytes(tomli_w.dumps(scene_to_dict(scene)).encode())
-    tmp.replace(path)
+    """Write ``scene`` as TOML (``fileio.write_atomic``)."""
+    write_atomic(path, tomli_w.dumps(scene_to_dict(scene)).encode())

@@ -24,7 +24,8 @@ from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Any
 
-from .errors import InputError
+from .errors import InputError, shown
+from .fileio import check_depth
 
 
 @dataclass(frozen=True)
@@ -202,44 +203,66 @@ OBJECT_DEFAULTS: Mapping[str, Mapping[str, float]] = MappingProxyType({
 })
 
 
+def _real(v: Any) -> bool:
+    """A finite number (an integer of any size counts: it is range-checked as one)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    return isinstance(v, int) or math.isfinite(v)
+
+
 def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
-    """Convert ``value`` to the setting's type or raise InputError."""
+    """Convert ``value`` to the setting's type or raise InputError. Integers are checked
+    against the range before any conversion (one beyond 64 bits has no float)."""
 
     def bad(rule: str) -> InputError:
         return InputError(source, field, rule)
 
     if spec.kind in ("float", "int"):
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad(f"must be a number, got {value!r}")
-        if not math.isfinite(value):
+            raise bad(f"must be a number, got {shown(value)}")
+        if not _real(value):
             raise bad("must be finite (no NaN or inf)")
+        if not spec.check(value):
+            raise bad(spec.rule + f", got {shown(value)}")
         if spec.kind == "int":
-            if float(value) != int(value):
-                raise bad(f"must be an integer, got {value!r}")
+            if isinstance(value, float) and not value.is_integer():
+                raise bad(f"must be an integer, got {shown(value)}")
             value = int(value)
         else:
             value = float(value)
     elif spec.kind == "choice":
         if not isinstance(value, str) or value not in spec.choices:
-            raise bad(spec.rule + f", got {value!r}")
+            raise bad(spec.rule + f", got {shown(value)}")
     elif spec.kind in ("int_pair", "float_pair"):
         if not isinstance(value, list | tuple) or len(value) != 2:
-            raise bad(f"must be a list of two numbers, got {value!r}")
-        out = []
-        for v in value:
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise bad(f"must hold two finite numbers, got {value!r}")
-            if spec.kind == "int_pair":
-                if float(v) != int(v):
-                    raise bad(f"must hold two integers, got {value!r}")
-                v = int(v)
-            else:
-                v = float(v)
-            out.append(v)
-        value = tuple(out)
+            raise bad(f"must be a list of two numbers, got {shown(value)}")
+        if not all(_real(v) for v in value):
+            raise bad(f"must hold two finite numbers, got {shown(value)}")
+        if not spec.check(value):
+            raise bad(spec.rule + f", got {shown(value)}")
+        if spec.kind == "int_pair":
+            if any(isinstance(v, float) and not v.is_integer() for v in value):
+                raise bad(f"must hold two integers, got {shown(value)}")
+            value = tuple(int(v) for v in value)
+        else:
+            value = tuple(float(v) for v in value)
     if not spec.check(value):
-        raise bad(spec.rule + f", got {value!r}")
+        raise bad(spec.rule + f", got {shown(value)}")
     return value
+
+
+def _cli_number(name: str, text: str) -> int | float:
+    """A number written on the command line: an integer stays one (of any size, for
+    the range check to refuse), anything else is a float."""
+    t = text.strip()
+    try:
+        return int(t)
+    except ValueError:
+        pass
+    try:
+        return float(t)
+    except ValueError:
+        raise InputError("<--set>", name, f"must be a number, got {shown(text)}") from None
 
 
 def parse_cli_value(name: str, text: str) -> Any:
@@ -251,14 +274,10 @@ def parse_cli_value(name: str, text: str) -> Any:
         return text
     if spec.kind in ("int_pair", "float_pair"):
         parts = text.strip("[]() ").replace(",", " ").split()
-        try:
-            return [float(p) for p in parts]
-        except ValueError:
-            raise InputError("<--set>", name, f"must be two numbers, got {text!r}") from None
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError("<--set>", name, f"must be a number, got {text!r}") from None
+        if len(parts) != 2:
+            raise InputError("<--set>", name, f"must be two numbers, got {shown(text)}")
+        return [_cli_number(name, p) for p in parts]
+    return _cli_number(name, text)
 
 
 def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
@@ -289,6 +308,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
     if not isinstance(table, Mapping):
         raise InputError(source, prefix.rstrip(".") or "<settings>",
                          "must be a table of setting = value")
+    check_depth(table, source)
     walk(table, "")
     return out
 

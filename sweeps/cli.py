@@ -6,14 +6,15 @@ code lives in its own module and is imported only when that command runs, so
 the others' libraries (matplotlib, pandas, MuJoCo: about a second together).
 
 Bad input (a scene file, a ``--set``, a path) prints one line naming the file, the
-field and the rule, and exits with status 2; nothing is written.
+field and the rule, and exits with status 2; a fault of the machine (a full disk, a
+read-only folder) one line naming the path and the reason, status 1; Ctrl-C the line
+``interrupted``, status 130 (``faults``, ``interrupt``). Nothing is half written.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -21,7 +22,6 @@ from collections.abc import Sequence
 # Nothing heavy here (NumPy and the rest come with main's imports): `shacc sweep` starts
 # its local cluster's fork server before them (main).
 from . import compile_cache
-from .cluster import ClusterLost
 
 
 def modes() -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -72,6 +72,15 @@ def _int_in(lo: int, hi: int | None = None):
     return parse
 
 
+def _path(text: str) -> str:
+    """An argparse type: a path, which is not empty and holds no NUL byte."""
+    if not text:
+        raise argparse.ArgumentTypeError("must name a file or folder, got an empty string")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError("a path cannot hold a NUL byte")
+    return text
+
+
 def _version() -> str:
     import importlib.metadata as md
 
@@ -96,32 +105,32 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func="settings_cmd:cmd_settings")
 
     c = command("precompute", "C, clusters and Shrinking of one scene")
-    c.add_argument("scene", help="scene TOML file")
+    c.add_argument("scene", type=_path, help="scene TOML file")
     _add_set(c)
-    c.add_argument("--json", metavar="OUT.json", help="write SPEC section 12a's keys")
+    c.add_argument("--json", metavar="OUT.json", type=_path, help="write SPEC section 12a's keys")
     c.set_defaults(func="precompute_cmd:cmd_precompute")
 
     c = command("evaluate", "evaluate scenes in every mode, as one batch (SPEC 12a)")
-    c.add_argument("scene", nargs="+",
+    c.add_argument("scene", nargs="+", type=_path,
                    help="scene TOML files, or folders of them (all evaluated as one batch)")
     _add_set(c)
     c.add_argument("--modes", nargs="+", default=list(PAPER_MODES), choices=list(MODES),
                    help="modes to evaluate (optimized runs SPEC 17's search first)")
-    c.add_argument("--json", metavar="OUT.jsonl",
+    c.add_argument("--json", metavar="OUT.jsonl", type=_path,
                    help="write SPEC section 12a's object, one line per scene (JSON Lines)")
     c.set_defaults(func="evaluate_cmd:cmd_evaluate")
 
     c = command("optimize", "search a scene's best task-space sizes: the optimized mode "
                 "(SPEC 17)")
-    c.add_argument("scene", help="scene TOML file")
+    c.add_argument("scene", type=_path, help="scene TOML file")
     _add_set(c)
-    c.add_argument("--json", metavar="OUT.json",
+    c.add_argument("--json", metavar="OUT.json", type=_path,
                    help="write SPEC section 12a's object with modes.optimized and an "
                    "optimize block")
     c.set_defaults(func="optimize_cmd:cmd_optimize")
 
     c = command("reproduce", "the paper's experiment: Fig. 6 and Fig. 7")
-    c.add_argument("--out", default="reproduce_out", help="output folder")
+    c.add_argument("--out", default="reproduce_out", type=_path, help="output folder")
     c.add_argument("--random-scenes", type=_int_in(0, 100_000), default=None,
                    help="random scenes (default 20; 4 with --quick)")
     c.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=0,
@@ -133,14 +142,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_set(c)
     c.add_argument("--workers", type=_int_in(1, 1024), default=None,
                    help="precompute processes (default: one per CPU)")
-    c.add_argument("--readme", help="also rewrite the marked section of this README")
+    c.add_argument("--readme", type=_path, help="also rewrite the marked section of this README")
     c.set_defaults(func="reproduce:cmd_reproduce")
 
     c = command("sweep", "a parameter sweep from a TOML config (resumable)")
-    c.add_argument("config", help="sweep config TOML")
-    c.add_argument("--out", help="output folder (resumes if it holds this sweep)")
+    c.add_argument("config", type=_path, help="sweep config TOML")
+    c.add_argument("--out", type=_path, help="output folder (resumes if it holds this sweep)")
     c.add_argument("--dry-run", action="store_true", help="print sizes and estimates only")
-    c.add_argument("--cache", help="precompute cache folder (default ~/.cache/shacc/precompute)")
+    c.add_argument("--cache", type=_path,
+                   help="precompute cache folder (default ~/.cache/shacc/precompute)")
     c.add_argument("--workers", type=_int_in(1, 1024), default=None,
                    help="precompute processes (default: one per CPU)")
     c.add_argument("--scheduler", metavar="ADDRESS",
@@ -150,14 +160,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func="runner:cmd_sweep")
 
     c = command("export-mjcf", "write a scene as MJCF (loads in MuJoCo)")
-    c.add_argument("scene", help="scene TOML file")
-    c.add_argument("out", help="MJCF file to write")
+    c.add_argument("scene", type=_path, help="scene TOML file")
+    c.add_argument("out", type=_path, help="MJCF file to write")
     _add_set(c)
     c.set_defaults(func="render:cmd_export")
 
     c = command("render", "3-D MuJoCo picture beside the top-down view")
-    c.add_argument("scene", help="scene TOML file")
-    c.add_argument("--out", required=True, help="PNG file")
+    c.add_argument("scene", type=_path, help="scene TOML file")
+    c.add_argument("--out", required=True, type=_path, help="PNG file")
     c.add_argument("--mode", default="shacc", choices=list(PAPER_MODES),
                    help="whose spaces to draw and roll out")
     c.add_argument("--width", type=_int_in(64, 8192), default=1280,
@@ -197,8 +207,37 @@ def _local_sweep(argv: Sequence[str]) -> bool:
     return argv[:1] == ["sweep"] and not given("--dry-run") and not given("--scheduler")
 
 
+def entry() -> None:
+    """The ``shacc`` console script: Ctrl-C handled from the first moment
+    (``interrupt``), then :func:`main`."""
+    from . import interrupt
+
+    interrupt.install()
+    sys.exit(main())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; returns its exit status. Every fault ends in one line on
+    stderr (``faults.report``): bad input 2, a fault of the machine 1, Ctrl-C 130, a
+    bug of ours 70 (``SHACC_DEBUG=1`` shows the traceback of any of them)."""
+    from .faults import GuardedStdout
+
     argv = sys.argv[1:] if argv is None else list(argv)
+    stdout = sys.stdout
+    sys.stdout = GuardedStdout(stdout)
+    try:
+        return _run(argv)
+    except SystemExit as e:  # argparse: --help, --version, bad arguments
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    except BaseException as e:
+        from .faults import report
+
+        return report(e)
+    finally:
+        sys.stdout = stdout
+
+
+def _run(argv: list[str]) -> int:
     if _local_sweep(argv):
         # First thing, before this process imports NumPy, dask and the rest: the local
         # cluster's fork server imports the workers' modules meanwhile (a config that
@@ -206,8 +245,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .cluster import start_fork_server
 
         start_fork_server()
-    from geometry_precompute import InputError
-
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
     # The sweep's evaluation workers turn the cache on for themselves; its client
@@ -215,24 +252,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
         compile_cache.enable()
     module, name = args.func.split(":")
-    try:
-        func = getattr(importlib.import_module(f"{__package__}.{module}"), name)
-        return func(args)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except ClusterLost as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        # Worker processes ignore SIGINT (sweeps.workers) and end with their pool.
-        print("interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        # The reader of stdout went away (`shacc settings | head`): not an error of ours.
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+    func = getattr(importlib.import_module(f"{__package__}.{module}"), name)
+    status = func(args)
+    from .faults import flush_stdout
+
+    flush_stdout()
+    return status
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

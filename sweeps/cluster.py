@@ -202,8 +202,13 @@ def start_fork_server() -> bool:
 
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
+    from .interrupt import start_resource_tracker
+
     for k, v in PRE_SPAWN.items():
         os.environ.setdefault(k, v)
+    # The server and its workers are spawned with SIGINT still blocked: Ctrl-C is the
+    # command's to handle (interrupt.py), never a traceback of theirs.
+    start_resource_tracker()
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORK_PRELOAD))
     try:
         multiprocessing.forkserver.ensure_running()
@@ -292,6 +297,69 @@ def _dashboard_on_demand(cluster) -> None:
     app.add_application(on_demand)
 
 
+# Seconds a --scheduler has to answer: a connection refused is known at once, a host
+# that does not answer (or a port where no Dask scheduler speaks) is given this long.
+SCHEDULER_TIMEOUT = 10.0
+
+
+def check_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT) -> None:
+    """Refuse, before any work, a scheduler address that is not one, or where nothing
+    listens (a refused connection is reported at once) or nothing answers within
+    ``timeout`` seconds."""
+    import socket
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    from geometry_precompute import InputError
+
+    def bad(rule: str) -> InputError:
+        return InputError("<arguments>", "--scheduler", rule)
+
+    try:
+        scheme, location = parse_address(address, strict=True)
+        host, port = parse_host_port(location) if scheme in ("tcp", "tls", "ws", "wss") \
+            else (None, None)
+    except (ValueError, TypeError) as e:
+        raise bad(f"not a Dask scheduler address such as tcp://10.0.0.5:8786 ({e}), got "
+                  f"{address!r}") from None
+    if host is None:
+        return
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except ConnectionRefusedError:
+        raise bad(f"nothing listens at {address} (connection refused)") from None
+    except TimeoutError:
+        raise bad(f"no answer from {address} within {timeout:g} s") from None
+    except OSError as e:
+        raise bad(f"cannot reach {address} ({e.strerror or e})") from None
+    # Something listens: it must be a Dask scheduler (a web server there answers the
+    # handshake with bytes that Dask reads as a length of exabytes).
+    client = _client(address, timeout)
+    with contextlib.suppress(Exception):
+        client.close()
+
+
+def _client(address: str, timeout: float):
+    """A distributed Client of the scheduler at ``address``, or the one-line error."""
+    import warnings
+
+    from distributed import Client
+
+    from geometry_precompute import InputError
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return Client(address, timeout=timeout)
+    except (OSError, TimeoutError, ValueError, MemoryError) as e:
+        why = " ".join(str(e).split()) or type(e).__name__
+        raise InputError("<arguments>", "--scheduler", f"no Dask scheduler answered at "
+                         f"{address!r} within {timeout:g} s ({why})") from None
+
+
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None,
             timeout: float = 60.0, warm_up: dict | None = None) -> Iterator[Pool]:
@@ -315,13 +383,8 @@ def connect(scheduler: str | None = None, workers: int | None = None,
             cluster, n_cpu, n_eval = _local(workers, warm_up or {})
             client = Client(cluster)
         else:
-            from geometry_precompute import InputError
 
-            try:
-                client = Client(scheduler, timeout=timeout)
-            except (OSError, TimeoutError, ValueError) as e:
-                raise InputError("<arguments>", "--scheduler", f"no Dask scheduler answered at "
-                                 f"{scheduler!r} ({e})") from None
+            client = _client(scheduler, SCHEDULER_TIMEOUT)
     try:
         if cluster is None:
             pool = _remote(client, scheduler, timeout)

@@ -35,6 +35,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,13 +44,16 @@ from typing import Any
 import numpy as np
 
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
+from geometry_precompute.errors import shown
 from geometry_precompute.generate import MAX_TASKS
 from geometry_precompute.scene import Scene, read_toml, scene_to_dict
-from geometry_precompute.settings import flatten_settings
+from geometry_precompute.settings import INT32_MAX, flatten_settings
 
 _TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}
 _RANDOM = {"kind", "count", "tasks", "sampling", "seed"}
 MAX_COUNT = 100_000_000  # random scenes in one sweep
+MAX_POINTS = 100_000     # sweep points (the point list is built, checked and stored)
+MAX_CHUNK = 1_000_000    # scenes per chunk
 _FILES = {"kind", "path"}
 
 
@@ -125,9 +129,9 @@ def installed_version() -> str:
         return "unknown"
 
 
-def _int(v: Any, src: str, fld: str, lo: int = 0) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-        raise InputError(src, fld, f"must be an integer >= {lo}, got {v!r}")
+def _int(v: Any, src: str, fld: str, lo: int = 0, hi: int = INT32_MAX) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise InputError(src, fld, f"must be an integer in [{lo}, {hi}], got {shown(v)}")
     return v
 
 
@@ -152,10 +156,12 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     if not isinstance(modes, list) or not modes \
             or any(m not in schema.ALL_MODES for m in modes) or len(set(modes)) != len(modes):
         raise InputError(src, "modes", f"must be distinct names from {list(schema.ALL_MODES)}")
-    chunk = _int(data.get("chunk", 32), src, "chunk", 1)
+    chunk = _int(data.get("chunk", 32), src, "chunk", 1, MAX_CHUNK)
     raw = data.get("source")
     if not isinstance(raw, Mapping) or "kind" not in raw:
         raise InputError(src, "source.kind", "missing: \"random\" or \"files\"")
+    if not isinstance(raw["kind"], str):
+        raise InputError(src, "source.kind", f"must be random or files, got {shown(raw['kind'])}")
     if raw["kind"] == "random":
         for key in raw:
             if key not in _RANDOM:
@@ -168,14 +174,13 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
             raise InputError(src, "source.tasks", f"must be [min, max] with 1 <= min <= max "
                              f"<= {MAX_TASKS} (the most objects the generator places)")
         sampling = raw.get("sampling", "both")
-        if sampling not in ("uniform", "gaussian", "both"):
+        if not isinstance(sampling, str) or sampling not in ("uniform", "gaussian", "both"):
             raise InputError(src, "source.sampling", "must be uniform, gaussian or both")
-        count = _int(raw.get("count"), src, "source.count", 1)
-        if count > MAX_COUNT:
-            raise InputError(src, "source.count", f"must be <= {MAX_COUNT}, got {count}")
+        count = _int(raw.get("count"), src, "source.count", 1, MAX_COUNT)
+        # Scene i is seeded seed + i: every seed stays a 32-bit integer.
+        seed = _int(raw.get("seed", 0), src, "source.seed", 0, INT32_MAX - count + 1)
         source_out = {"kind": "random", "count": count,
-                      "tasks": list(tasks), "sampling": sampling,
-                      "seed": _int(raw.get("seed", 0), src, "source.seed")}
+                      "tasks": list(tasks), "sampling": sampling, "seed": seed}
     elif raw["kind"] == "files":
         for key in raw:
             if key not in _FILES:
@@ -184,12 +189,12 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         path = raw.get("path")
         if not isinstance(path, str) or not (base_dir / path).is_dir():
             raise InputError(src, "source.path", f"must name a folder of scene files, got "
-                             f"{path!r}")
+                             f"{shown(path)}")
         if not list((base_dir / path).glob("*.toml")):
-            raise InputError(src, "source.path", f"no *.toml scene files in {path!r}")
+            raise InputError(src, "source.path", f"no *.toml scene files in {shown(path)}")
         source_out = {"kind": "files", "path": path}
     else:
-        raise InputError(src, "source.kind", f"must be random or files, got {raw['kind']!r}")
+        raise InputError(src, "source.kind", f"must be random or files, got {shown(raw['kind'])}")
 
     fixed = _check_point(data.get("settings", {}), src, "settings")
     axes = data.get("axes", {})
@@ -199,13 +204,19 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     for k, values in axes.items():
         if not isinstance(values, list) or not values:
             raise InputError(src, f"axes.{k}", "must be a non-empty list of values")
+    explicit = data.get("points", [])
+    if not isinstance(explicit, list):
+        raise InputError(src, "points", "must be an array of tables ([[points]])")
+    # Counted before anything is built: the grid product of a few long axes is large.
+    n_points = (math.prod(len(v) for v in axes.values()) if axes else 0) + len(explicit)
+    if n_points > MAX_POINTS:
+        raise InputError(src, "axes", f"the axes and [[points]] give {n_points} points, more "
+                         f"than {MAX_POINTS} a sweep may have; split it into several sweeps")
+    for k, values in axes.items():
         for v in values:
             _check_point({k: v}, src, "axes")
     points = [dict(zip(axes, combo, strict=True)) for combo in
               itertools.product(*axes.values())] if axes else []
-    explicit = data.get("points", [])
-    if not isinstance(explicit, list):
-        raise InputError(src, "points", "must be an array of tables ([[points]])")
     points += [_check_point(p, src, f"points[{i}]") for i, p in enumerate(explicit)]
     if not points:
         points = [{}]
@@ -214,8 +225,9 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     scheduler = data.get("scheduler")
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise InputError(src, "scheduler", "must be a Dask scheduler address such as "
-                         f"\"tcp://10.0.0.5:8786\", got {scheduler!r}")
+                         f"\"tcp://10.0.0.5:8786\", got {shown(scheduler)}")
     cfg = SweepConfig(name, tuple(modes), chunk, source_out, points, base_dir, scheduler)
+    _check_templates_fit(cfg, src)
     if source_out["kind"] == "files":
         # Scene files are loaded (and validated) before any work starts, and each point
         # against each scene's own [settings]. Random scenes have no [settings] of their
@@ -233,6 +245,42 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
                                  "evaluated as one batch: set start_grid in the config's "
                                  "[settings] or make the scenes agree")
     return cfg
+
+
+def _probe_scene() -> Scene:
+    """The object kinds and templates the random generator uses, at their default
+    sizes, far apart: a point's template settings are checked on it."""
+    from geometry_precompute.scene import parse_scene
+
+    return parse_scene({"name": "probe", "objects": [
+        {"id": "mug", "kind": "mug", "position": [0.0, 0.0, 0.0]},
+        {"id": "cup", "kind": "cup", "position": [0.0, 5.0, 0.0]}], "tasks": [
+        {"id": "side", "object": "mug", "template": "side_grasp"},
+        {"id": "handle", "object": "cup", "template": "handle_grasp"}]}, "<generator>")
+
+
+def _check_templates_fit(cfg: SweepConfig, src: str) -> None:
+    """Every point's template settings fit every scene of the source (bounds min <=
+    init), here rather than in the first task of a running sweep. Only the
+    precompute-stage settings matter, so each distinct set of them is checked once."""
+    from geometry_precompute.templates import resolve_tasks
+
+    scenes = cfg.scenes() if cfg.source["kind"] == "files" else [_probe_scene()]
+    seen: set[str] = set()
+    for k, point in enumerate(cfg.points):
+        stage = json.dumps(DEFAULTS.with_overrides(point).by_stage("precompute"),
+                           sort_keys=True, default=str)
+        if stage in seen:
+            continue
+        seen.add(stage)
+        for scene in scenes:
+            try:
+                resolve_tasks(scene, scene.settings(DEFAULTS, point))
+            except InputError as e:
+                where = "the random generator's mugs and cups" if scene.source == \
+                    "<generator>" else e.source
+                raise InputError(src, f"point {k}", f"{e.field} of {where}: {e.rule} "
+                                 f"(the point sets {shown(point)})") from None
 
 
 def load_config(path: str | Path) -> SweepConfig:

@@ -83,7 +83,6 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     if quick:
         settings = settings.with_overrides({"bootstrap_resamples": 200})
     n_boot = settings["bootstrap_resamples"]
-    out.mkdir(parents=True, exist_ok=True)
 
     manual = shipped_scene_paths()
     randoms = [(seed + i, "uniform" if i % 2 == 0 else "gaussian") for i in range(n_random)]

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from geometry_precompute import DEFAULTS, InputError
+from geometry_precompute import DEFAULTS, HostError, InputError
+from geometry_precompute.fileio import read_bytes_limited
 
 from . import tables
 from .config import SweepConfig
@@ -126,14 +127,38 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     ``scheduler``: an existing Dask cluster's address (default: the config's
     ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
     that may be precomputed ahead of the evaluation."""
+    # Everything that can refuse the sweep is checked before a file or folder is made.
+    scheduler = scheduler or cfg.scheduler
+    if scheduler is not None:
+        from .cluster import check_scheduler
+
+        check_scheduler(scheduler)
     check_output_dir(out, "--out", SWEEP_FILES)
     if cache is not None:
         check_output_dir(cache, "--cache", ("*",))
-        cache.mkdir(parents=True, exist_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
+    h = cfg.hash()  # scene files are loaded and checked here
+    _check_folder_kinds(out)
+    _check_marker(out, cfg, h, write=False)
+    try:
+        if cache is not None:
+            cache.mkdir(parents=True, exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise HostError.of(e, out, "make the folder") from None
     with folder_lock(out):
-        return _run_locked(cfg, out, cache, workers, progress, scheduler or cfg.scheduler,
-                           lookahead)
+        return _run_locked(cfg, out, cache, workers, progress, scheduler, lookahead, h)
+
+
+def _check_folder_kinds(out: Path) -> None:
+    """What a sweep writes into ``out`` is of the kind it writes: ``.lock`` and
+    ``config.json`` files, ``scenes`` and ``rollouts`` folders."""
+    kinds = {".lock": False, "config.json": False, **dict.fromkeys(TABLES, True)}
+    for name, folder in kinds.items():
+        p = out / name
+        if (p.exists() or p.is_symlink()) and p.is_dir() != folder:
+            raise InputError(p, "--out", f"is {'a file' if folder else 'a folder'} where this "
+                             f"sweep keeps {'a folder' if folder else 'a file'}; remove it or "
+                             "use a new --out")
 
 
 @contextlib.contextmanager
@@ -157,20 +182,21 @@ def folder_lock(out: Path):
         os.close(fd)
 
 
-def _check_marker(out: Path, cfg: SweepConfig, h: str) -> None:
+def _check_marker(out: Path, cfg: SweepConfig, h: str, write: bool = True) -> None:
+    """``out/config.json`` names this sweep, or is missing (then written, ``write``)."""
     marker = out / "config.json"
     if marker.exists():
         try:
-            previous = json.loads(marker.read_text())
+            previous = json.loads(read_bytes_limited(marker, "a sweep's config.json"))
             if not isinstance(previous, dict):
                 raise ValueError("not an object")
-        except (ValueError, UnicodeDecodeError) as e:
+        except (ValueError, UnicodeDecodeError, RecursionError) as e:
             raise InputError(marker, "<file>", f"is damaged ({e}); remove the folder or use "
                              "a new --out") from None
         if previous.get("hash") != h:
             raise InputError(out, "config", f"this folder holds another sweep (hash "
                              f"{previous.get('hash')}, this config {h}); use a new --out")
-    else:
+    elif write:
         write_json(marker, {"hash": h, "config": cfg.resolved()})
 
 
@@ -192,10 +218,9 @@ def _rollouts_per_scene(cfg: SweepConfig, files) -> list[float]:
 
 
 def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | None,
-                progress: bool, scheduler: str | None, lookahead: int) -> dict:
+                progress: bool, scheduler: str | None, lookahead: int, h: str) -> dict:
     t0 = time.perf_counter()
-    h = cfg.hash()  # scene files are loaded and checked here, before any work
-    _check_marker(out, cfg, h)
+    _check_marker(out, cfg, h)  # again, under the lock
     chunks = plan(cfg)
     for name in TABLES:
         (out / name).mkdir(exist_ok=True)
@@ -375,6 +400,10 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             totals["rollouts_this_run"] += res.n_rollouts
             totals["precomputed"] += res.precomputed
             totals["precompute_cache_hits"] += res.cache_hits
+            if res.cache_warning and "cache_warning" not in totals:
+                totals["cache_warning"] = res.cache_warning
+                tqdm.write(f"warning: {res.cache_warning}; the sweep goes on without storing "
+                           "precomputed scenes", file=sys.stderr)
             totals["compilations"] += res.compiled
             totals["programs_loaded"] += res.loaded
             rollouts_bar.update(res.n_rollouts)

@@ -208,9 +208,9 @@ def test_ctrl_c_ends_with_one_line_and_no_process_left(tmp_path):
                              "--workers", "2"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.time() + 120
-    while time.time() < deadline and not list((tmp_path / "c").glob("*.pkl")):
+    while time.time() < deadline and not list((tmp_path / "c").glob("*.json")):
         time.sleep(0.2)  # wait until the precompute workers are at work
-    assert list((tmp_path / "c").glob("*.pkl")), "the sweep never started precomputing"
+    assert list((tmp_path / "c").glob("*.json")), "the sweep never started precomputing"
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err

@@ -59,7 +59,7 @@ def write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
     (CONFIG + '[[points]]\nbogus = 1\n', "points[0].bogus", "unknown setting"),
     (CONFIG.replace('name = "tiny"', 'name = "tiny"\nspeed = 1'), "speed", "unknown field"),
     (CONFIG.replace('kind = "random"', 'kind = "lottery"'), "source.kind", "random or files"),
-    (CONFIG.replace("count = 3", "count = 0"), "source.count", ">= 1"),
+    (CONFIG.replace("count = 3", "count = 0"), "source.count", "in [1, "),
 ])
 def test_bad_configs_rejected_before_work(tmp_path, text, field, rule):
     with pytest.raises(InputError) as e:
@@ -191,7 +191,7 @@ def test_killed_workers_and_client_lose_and_duplicate_nothing(tmp_path, finished
                             stderr=subprocess.DEVNULL,
                             start_new_session=True)  # its own group: to find its workers
     deadline = time.time() + 300
-    while not list(cache.glob("*.pkl")) and proc.poll() is None and time.time() < deadline:
+    while not list(cache.glob("*.json")) and proc.poll() is None and time.time() < deadline:
         time.sleep(0.05)
     time.sleep(0.3)
     evaluators = _session_processes(proc.pid, "jaxlib")
@@ -401,7 +401,7 @@ def test_missing_kind_of_worker_is_said_and_the_sweep_goes_on_when_one_joins(
 
     def lose_and_replace() -> None:
         deadline = time.time() + 300
-        while not list(cache.glob("*.pkl")) and time.time() < deadline:
+        while not list(cache.glob("*.json")) and time.time() < deadline:
             time.sleep(0.005)  # the sweep has started: its first scene is precomputed
         started.kill(started.workers["evaluate"])
         while not said and time.time() < deadline:  # the line, then a new worker
