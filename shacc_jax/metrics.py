@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Bool, Float, Int
+
+from geometry_precompute.outcomes import scene_metrics as scene_metrics_np
 
 from .types import OUTCOMES, SUCCESS, SceneMetrics
 
@@ -41,22 +42,11 @@ def batch_metrics(outcome: Int[Array, "S M N T"], delta_r: Float[Array, "S M N T
         outcome, delta_r, task_mask))
 
 
-def host_metrics(outcome: np.ndarray, delta_r: np.ndarray, task_mask: np.ndarray
-                 ) -> SceneMetrics:
+def host_metrics(outcome, delta_r, task_mask) -> SceneMetrics:
     """:func:`batch_metrics` in NumPy and double precision, of rollouts (*lead, S, M, N,
     T) (``*lead``: e.g. a points axis) with ``task_mask`` (S, T): u_scene = successes /
     rollouts as a float64 fraction, delta_R_mean the float64 mean of the successes'
     delta_R (NaN where there is none), outcome_counts (*lead, S, M, 5) and n_rollouts
-    (*lead, S, M) as int64."""
-    outcome = np.asarray(outcome)
-    valid = np.broadcast_to(np.asarray(task_mask, bool)[:, None, None, :], outcome.shape)
-    counts = np.stack([np.sum(valid & (outcome == c), axis=(-2, -1))
-                       for c in range(len(OUTCOMES))], axis=-1).astype(np.int64)
-    n = np.sum(valid, axis=(-2, -1)).astype(np.int64)
-    success = valid & (outcome == SUCCESS)
-    n_success = counts[..., SUCCESS]
-    total = np.sum(np.where(success, np.asarray(delta_r, np.float64), 0.0), axis=(-2, -1))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = n_success / np.maximum(n, 1)
-        mean = np.where(n_success > 0, total / np.maximum(n_success, 1), np.nan)
-    return SceneMetrics(u.astype(np.float64), mean, counts, n)
+    (*lead, S, M) as int64 (``geometry_precompute.outcomes``, which a sweep's CPU workers
+    use without JAX)."""
+    return SceneMetrics(*scene_metrics_np(outcome, delta_r, task_mask))

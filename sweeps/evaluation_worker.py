@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
+import numpy as np
 import pyarrow as pa
 
 from geometry_precompute.bake import concatenate
@@ -168,7 +169,7 @@ def _warm_up(job: ChunkJob, ref) -> dict:
                        job.shapes.tasks, job.shapes.objects, 0.0, settings)
     WARM_UP_MARKS["baked"] = time.time()
     evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
-                    job.modes, tuple(COMPACT))
+                    job.modes, tuple(COMPACT), metrics=False)
     WARM_UP_MARKS["ended"] = time.time()
     loaded = _COUNTS["loaded"] - before["loaded"]
     return {"seconds": time.perf_counter() - t0, "loaded": loaded,
@@ -181,7 +182,6 @@ class ChunkArrays:
     the evaluation worker to the CPU worker that makes its tables."""
 
     rollouts: list        # per point: outcome, activated, step, delta_R (S, M, N, T)
-    metrics: list         # per point: u_scene, delta_R_mean, outcome_counts (S, ...)
     labels: dict          # per scene: name, n_tasks, C_init, C_final, d, h
     counts: dict          # precomputed, cache_hits
     seconds: dict
@@ -226,17 +226,17 @@ def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
     _setup()
     before = dict(_COUNTS)
     t1 = time.perf_counter()
-    evs = evaluate_points(joined.bakes, job.modes, tuple(COMPACT))
+    # The per-scene metrics are computed by encode_chunk on a CPU worker, off this
+    # worker's path (8 ms a 1 000-scene chunk).
+    evs = evaluate_points(joined.bakes, job.modes, tuple(COMPACT), metrics=False)
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}
                 for ev in evs]
-    metrics = [{k: getattr(ev.metrics, k)[:S] for k in
-                ("u_scene", "delta_R_mean", "outcome_counts")} for ev in evs]
     t2 = time.perf_counter()
     programs = _COUNTS["programs"] - before["programs"]
     loaded = _COUNTS["loaded"] - before["loaded"]
-    return ChunkArrays(rollouts, metrics, joined.labels, joined.counts,
+    return ChunkArrays(rollouts, joined.labels, joined.counts,
                        {**joined.seconds, "evaluate": t2 - t1},
                        programs - loaded, loaded, f"{socket.gethostname()}:{os.getpid()}")
 
@@ -245,13 +245,18 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
     """A chunk's two Parquet parts from its evaluation (a CPU worker's task: the tables
     of many chunks are made in parallel, not one after another on the accelerator's
     worker)."""
+    from geometry_precompute.outcomes import scene_metrics
+
     t0 = time.perf_counter()
     scenes, rollouts = [], []
-    for i, p, ro, me in zip(job.chunk.points, job.points, arrays.rollouts, arrays.metrics,
-                            strict=True):
+    S = len(job.chunk.scenes)
+    n_tasks = np.asarray(arrays.labels["n_tasks"])
+    task_mask = np.arange(job.shapes.tasks)[None, :] < n_tasks[:, None]
+    for i, p, ro in zip(job.chunk.points, job.points, arrays.rollouts, strict=True):
+        u, mean, counts, _ = scene_metrics(ro["outcome"], ro["delta_R"], task_mask[:S])
+        me = SimpleNamespace(u_scene=u, delta_R_mean=mean, outcome_counts=counts)
         scenes.append(tables.scenes_table(i, p, job.setting_names, job.modes,
-                                          job.chunk.scenes, arrays.labels,
-                                          SimpleNamespace(**me)))
+                                          job.chunk.scenes, arrays.labels, me))
         rollouts.append(tables.rollouts_table(i, job.modes, job.chunk.scenes,
                                               SimpleNamespace(**ro)))
     scenes_t, rollouts_t = pa.concat_tables(scenes), pa.concat_tables(rollouts)

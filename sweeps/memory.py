@@ -101,8 +101,12 @@ def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
     """Scenes the optimized mode's search may take in one call: each holds population x
     search starts x tasks activation rollouts at once."""
     limit = budget() if limit is None else limit
-    per_scene = bytes_per_rollout(False) * int(np.max(baked.optimize_population)) * \
-        baked.opt_starts.shape[1] * baked.n_tasks
+    # The larger of a generation (population x search starts) and the final validation
+    # (the candidates, Shrinking's and the initial sizes x validation starts).
+    at_once = max(int(np.max(baked.optimize_population)) * baked.opt_starts.shape[1],
+                  (int(np.max(baked.optimize_candidates)) + 2)
+                  * int(np.max(baked.optimize_validation_starts)))
+    per_scene = bytes_per_rollout(False) * at_once * baked.n_tasks
     if per_scene > limit:
         raise InputError("<memory>", "optimize_population x optimize_starts", "the search "
                          f"of one scene ({baked.n_tasks} tasks) needs {_size(per_scene)}, "
@@ -112,7 +116,8 @@ def search_scenes_per_call(baked: BakedScenes, limit: int | None = None) -> int:
 
 
 def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
-                       limit: int | None = None, params=None) -> Evaluation:
+                       limit: int | None = None, params=None,
+                       metrics: bool = True) -> Evaluation:
     """``evaluate(geometry, params, layout)`` (default ``shacc_jax.evaluate_on_devices``)
     of a bake's ``modes``, as NumPy arrays, split over the start grid when the batch
     needs more than ``limit`` bytes (default :func:`budget`). ``params``: P Params of
@@ -164,6 +169,7 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
                               np.concatenate(parts, axis=2 + lead)
                               for parts in zip(*pieces, strict=True)))
     # Metrics once, in double precision, over the joined rollouts: the same numbers
-    # whether the batch ran in one piece or several (shacc_jax.metrics).
+    # whether the batch ran in one piece or several (shacc_jax.metrics). ``metrics``
+    # False leaves them to the caller (a sweep computes them on a CPU worker).
     return Evaluation(rollouts, host_metrics(rollouts.outcome, rollouts.delta_R,
-                                             baked.task_mask))
+                                             baked.task_mask) if metrics else None)

@@ -52,13 +52,14 @@ def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) 
     ev0 = next(iter(parts.values()))[0]
     rollouts = type(ev0.rollouts)(*(pick(lambda e, k=k: e.rollouts[k])
                                     for k in range(len(ev0.rollouts))))
-    metrics = type(ev0.metrics)(*(pick(lambda e, k=k: e.metrics[k])
-                                  for k in range(len(ev0.metrics))))
+    metrics = None if ev0.metrics is None else type(ev0.metrics)(
+        *(pick(lambda e, k=k: e.metrics[k]) for k in range(len(ev0.metrics))))
     return Evaluation(rollouts, metrics)
 
 
 def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
-                   found: Search | None = None) -> tuple[Evaluation, Search | None]:
+                   found: Search | None = None,
+                   metrics: bool = True) -> tuple[Evaluation, Search | None]:
     """Every mode of ``modes`` (shacc_jax.ALL_MODES) for a bake, as NumPy arrays in that
     order, and the search when ``optimized`` is among them: the search runs on its own
     starts, then its spaces replace the optimised ones and the scene's usual starts are
@@ -68,7 +69,7 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     plain = tuple(m for m in modes if m != OPTIMIZED)
     parts: dict[str, tuple[Evaluation, int]] = {}
     if plain:
-        ev = memory.evaluate_in_pieces(baked, plain, evaluate)
+        ev = memory.evaluate_in_pieces(baked, plain, evaluate, metrics=metrics)
         parts.update({m: (ev, i) for i, m in enumerate(plain)})
     if OPTIMIZED in modes:
         from shacc_jax.optimize import optimized_spaces, search, search_sizes
@@ -82,27 +83,30 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
             found = search(baked, memory.search_scenes_per_call(baked))
         center, dims = optimized_spaces(baked, found)
         best = replace(baked, center_opt=center, dims_opt=dims)
-        parts[OPTIMIZED] = (memory.evaluate_in_pieces(best, ("shacc",), evaluate), 0)
+        parts[OPTIMIZED] = (memory.evaluate_in_pieces(best, ("shacc",), evaluate,
+                                                      metrics=metrics), 0)
     return _join_modes(parts, modes), found
 
 
 def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str],
-                    fields: Sequence[str] | None = None) -> list[Evaluation]:
+                    fields: Sequence[str] | None = None,
+                    metrics: bool = True) -> list[Evaluation]:
     """Bakes of the same scenes that differ only in rollout settings (Params), evaluated
     as one call with a points axis; NumPy results, one Evaluation per bake. The
     optimized mode searches per bake (its search depends on the rollout settings).
     ``fields``: the Rollouts fields to copy to the host, the others None (default all;
-    ``shacc_jax.evaluate_on_devices``)."""
+    ``shacc_jax.evaluate_on_devices``). ``metrics`` False leaves the per-scene metrics
+    None (a sweep computes them on a CPU worker, ``shacc_jax.host_metrics``)."""
     run = shacc_jax.evaluate_on_devices if fields is None else \
         partial(shacc_jax.evaluate_on_devices, fields=fields)
     if len(bakes) == 1 or OPTIMIZED in modes:
-        return [evaluate_baked(b, modes, run)[0] for b in bakes]
+        return [evaluate_baked(b, modes, run, metrics=metrics)[0] for b in bakes]
     for b in bakes[1:]:  # a grouping error would evaluate one point on another's spaces
         for name in GEOMETRY_FIELDS:
             if not np.array_equal(getattr(b, name), getattr(bakes[0], name)):
                 raise RuntimeError(f"sweep points grouped together differ in {name}")
     ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), run, params=[
-        shacc_jax.Params.from_bake(b) for b in bakes])
+        shacc_jax.Params.from_bake(b) for b in bakes], metrics=metrics)
     return [jax.tree.map(lambda a, i=i: a[i], ev) for i in range(len(bakes))]
 
 
@@ -155,16 +159,36 @@ def optimized_params(ev: Evaluated, s: int) -> dict[str, dict[str, float]]:
 
 
 def optimize_json(ev: Evaluated, s: int) -> dict:
-    """The ``optimize`` block of SPEC section 12a's object (section 17)."""
+    """The ``optimize`` block of SPEC section 12a's object (section 17): the parameters
+    chosen, and success on the search's starts, on the validation starts and on the
+    held-out grid (where those modes were evaluated) side by side, and which candidate
+    won."""
+    from shacc_jax.optimize import winner_name
+
     f, st = ev.search, ev.results[s].settings
+    held = {m: float(ev.evaluation.metrics.u_scene[s, i]) for i, m in enumerate(ev.modes)}
     return {
         "params": optimized_params(ev, s),
+        "chosen": winner_name(f.winner[s], st["optimize_candidates"]),
+        "success": {
+            "search": {"init": float(f.objective_init[s]),
+                       "shrinking": float(f.objective_shrunk[s]),
+                       "optimized": float(f.objective[s])},
+            "validation": {"init": float(f.validation_init[s]),
+                           "shrinking": float(f.validation_shrunk[s]),
+                           "optimized": float(f.validation[s])},
+            "held_out": {m: held[m] for m in ("baseline", "shrinking", "shacc", "optimized")
+                         if m in held}},
         "objective": {"init": float(f.objective_init[s]),
                       "shrinking": float(f.objective_shrunk[s]),
                       "optimized": float(f.objective[s]),
                       "per_generation": [float(v) for v in f.history[s]]},
         "volume": float(f.volume[s]),
+        "clutteredness": float(f.clutteredness[s]),
         "search_starts": ev.baked.opt_starts[s][ev.baked.opt_start_mask[s]].tolist(),
         "settings": {k: st[k] for k in ("optimize_starts", "optimize_seed",
-                                        "optimize_population", "optimize_generations")},
+                                        "optimize_population", "optimize_generations",
+                                        "optimize_validation_starts",
+                                        "optimize_validation_seed", "optimize_candidates",
+                                        "optimize_selection")},
     }
