@@ -32,7 +32,7 @@ from .bodies import object_body
 from .errors import InputError
 from .precompute import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS
-from .starts import optimize_start_poses, start_poses
+from .starts import optimize_start_poses, start_plane, start_poses
 from .templates import TaskSpace
 
 GEOMETRY_FIELDS = schema.names(schema.GEOMETRY)
@@ -164,10 +164,15 @@ def _search_fields(results: Sequence[PrecomputeResult], T: int) -> dict[str, np.
            "center_dq": np.zeros((S, T, 3, MAX_PARAMS)),
            "dims_dq": np.zeros((S, T, 3, MAX_PARAMS)),
            "opt_starts": np.tile([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (S, No, 1)),
-           "opt_start_mask": np.zeros((S, No), bool)}
+           "opt_start_mask": np.zeros((S, No), bool),
+           "start_plane": np.array([[x, *ys, *zs] for x, ys, zs in
+                                    (start_plane(r.scene, r.settings) for r in results)]),
+           "optimize_validate": np.array([r.settings["optimize_selection"] == "validation"
+                                          for r in results])}
     for k in ("q_min", "q_init", "q_shrunk"):
         out[k] = np.zeros((S, T, MAX_PARAMS))
-    for k in ("optimize_seed", "optimize_population", "optimize_generations"):
+    for k in ("optimize_seed", "optimize_population", "optimize_generations",
+              "optimize_validation_starts", "optimize_validation_seed", "optimize_candidates"):
         out[k] = np.array([r.settings[k] for r in results], np.int64)
     for si, r in enumerate(results):
         out["opt_starts"][si, :len(opt[si])] = opt[si]

@@ -107,6 +107,14 @@ SEARCH = (
     Field("optimize_seed", ("S",), "int", "the search's seed"),
     Field("optimize_population", ("S",), "int", "CMA-ES population (one value per batch)"),
     Field("optimize_generations", ("S",), "int", "generations (one value per batch)"),
+    Field("start_plane", ("S", 5), "float",
+          "the start plane: x, y from, y to, z from, z to (validation starts are drawn on it)"),
+    Field("optimize_validation_starts", ("S",), "int", "validation starts of the scene"),
+    Field("optimize_validation_seed", ("S",), "int", "their seed"),
+    Field("optimize_candidates", ("S",), "int",
+          "the search's best distinct candidates validated (one value per batch)"),
+    Field("optimize_validate", ("S",), "bool",
+          "optimize_selection = validation (else the search's best on its own starts)"),
 )
 
 GRIPPER = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",

@@ -114,6 +114,13 @@ _SPECS: list[SettingSpec] = [
     _spec("optimize_seed", 1, "int", "optimize", _range(0, INT32_MAX)),
     _spec("optimize_population", 64, "int", "optimize", _range(4, 4096)),
     _spec("optimize_generations", 30, "int", "optimize", _range(1, 10000)),
+    # Selection by validation (SPEC section 17, revised): a third set of starts, its own
+    # seed, the search's best few distinct candidates (a static size of its program).
+    _spec("optimize_validation_starts", 256, "int", "optimize", _range(1, 1 << 16)),
+    _spec("optimize_validation_seed", 2, "int", "optimize", _range(0, INT32_MAX)),
+    _spec("optimize_candidates", 8, "int", "optimize", _range(1, 64)),
+    _spec("optimize_selection", "validation", "choice", "optimize",
+          _choice("validation", "search"), ("validation", "search")),
     # Template defaults (SPEC section 3's table).
     _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN),
     _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN),
@@ -162,6 +169,13 @@ _DOCS = {
     "optimize_seed": "optimized mode: seed of the search's starts and of its random draws",
     "optimize_population": "optimized mode: candidates per generation of the search",
     "optimize_generations": "optimized mode: generations of the search",
+    "optimize_validation_starts": "optimized mode: start poses that choose among the "
+                                  "search's best candidates, Shrinking and the initial sizes",
+    "optimize_validation_seed": "optimized mode: seed of the validation starts",
+    "optimize_candidates": "optimized mode: the search's best distinct candidates validated",
+    "optimize_selection": "optimized mode: validation (ties to lower C, then larger spaces; "
+                          "chosen on the validation starts, ties to Shrinking) or search "
+                          "(the search's best on its own starts, ties to larger spaces)",
     "side_grasp.radius_init": "side grasp cylinder's initial radius, m",
     "side_grasp.radius_margin": "side grasp's smallest radius is object radius + this, m",
     "side_grasp.height_margin": "side grasp cylinder reaches this far above the object, m",

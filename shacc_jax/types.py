@@ -110,15 +110,23 @@ def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,
 
 
 class Search(NamedTuple):
-    """The search's result per scene (leading axis S). The objective is u_scene under
-    the shrinking rules on the search's own starts (never the evaluation grid)."""
+    """The search's result per scene (leading axis S). The search objective is u_scene
+    under the shrinking rules on the search's own starts, the validation one the same
+    on the validation starts; neither is the evaluation grid, which stays held out.
+    ``winner`` names the chosen candidate: 0 Shrinking's sizes, 1 + r the search's
+    (r + 1)-th best distinct candidate, ``optimize_candidates`` + 1 the initial sizes."""
 
-    q: Float[Array, "S T P"]                # the best candidate's parameters
+    q: Float[Array, "S T P"]                # the chosen candidate's parameters
     objective: Float[Array, " S"]           # its u_scene on the search starts
     volume: Float[Array, " S"]              # its spaces' summed volume, m^3
     objective_init: Float[Array, " S"]      # the initial spaces' u_scene, same starts
     objective_shrunk: Float[Array, " S"]    # Shrinking's
-    history: Float[Array, "S G"]            # best objective so far, per generation
+    history: Float[Array, "S G"]            # best search objective so far, per generation
+    validation: Float[Array, " S"]          # the chosen candidate's u_scene, validation
+    validation_init: Float[Array, " S"]     # the initial sizes', validation starts
+    validation_shrunk: Float[Array, " S"]   # Shrinking's, validation starts
+    winner: Int[Array, " S"]                # which candidate was chosen (above)
+    clutteredness: Float[Array, " S"]       # C of the chosen spaces, estimated
 
 
 class Rollouts(NamedTuple):

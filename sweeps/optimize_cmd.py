@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import time
 
+from shacc_jax.optimize import winner_name
 from shacc_jax.types import ALL_MODES
 
 from .evaluate_cmd import print_table
@@ -58,9 +59,29 @@ def cmd_optimize(args) -> int:
                             for j, (c, w) in enumerate(zip(row, widths, strict=True))))
             if i == 0:
                 print("  ".join("-" * w for w in widths))
-        print(f"\nsuccess on the search's {s['optimize_starts']} starts (what it maximised): "
-              f"initial {found.objective_init[0]:.3f}, shrinking "
-              f"{found.objective_shrunk[0]:.3f}, optimized {found.objective[0]:.3f}")
+        me = ev.evaluation.metrics.u_scene[0]
+        grid = dict(zip(ev.modes, me, strict=True))
+        rows = [("success on", "starts", "initial", "shrinking", "optimized"),
+                ("search (what it maximised)", str(s["optimize_starts"]),
+                 f"{found.objective_init[0]:.3f}", f"{found.objective_shrunk[0]:.3f}",
+                 f"{found.objective[0]:.3f}"),
+                ("validation (what chose)", str(s["optimize_validation_starts"]),
+                 f"{found.validation_init[0]:.3f}", f"{found.validation_shrunk[0]:.3f}",
+                 f"{found.validation[0]:.3f}"),
+                ("held out (the grid)", str(ev.baked.n_starts),
+                 f"{grid['baseline']:.3f}" if "baseline" in grid else "-",
+                 f"{grid['shrinking']:.3f}" if "shrinking" in grid else "-",
+                 f"{grid['optimized']:.3f}")]
+        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        print()
+        for i, row in enumerate(rows):
+            print("  ".join(c.ljust(w) if j == 0 else c.rjust(w)
+                            for j, (c, w) in enumerate(zip(row, widths, strict=True))))
+            if i == 0:
+                print("  ".join("-" * w for w in widths))
+        print(f"chosen: {winner_name(found.winner[0], s['optimize_candidates'])} "
+              f"(selection {s['optimize_selection']}; estimated C of its spaces "
+              f"{found.clutteredness[0]:.4f})")
         print(f"convergence (generation: best so far): {_convergence(found.history[0])}")
         print(f"\nheld out: the scene's {ev.baked.n_starts} grid starts (seed {s['seed']})")
         print_table(ev, [0], with_scene=False)

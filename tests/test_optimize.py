@@ -74,13 +74,21 @@ def test_search_finds_the_brute_force_best():
     """Two side grasps (one radius each): a 41 x 41 grid of the two radii, every point
     scored by the same objective, against the search with its default sizes. Scene 0
     is a mug behind a mug: Shrinking shrinks both to their minimum, the best keeps the
-    rear one whole (better than both the initial and the Shrinking sizes)."""
-    results = [precompute(scene_from_dict(_two_mugs(0.0, (0.15, 0.0)))),
-               precompute(scene_from_dict(_two_mugs(-0.05, (0.12, 0.05))))]
+    rear one whole (better than both the initial and the Shrinking sizes). With the
+    ``search`` selection the result is the brute force's best on the search starts;
+    with validation (the default) that larger space is genuinely better, so it is
+    still what is chosen."""
+    scenes = [scene_from_dict(_two_mugs(0.0, (0.15, 0.0))),
+              scene_from_dict(_two_mugs(-0.05, (0.12, 0.05)))]
+    results = [precompute(sc, sc.settings(overrides={"optimize_selection": sel}))
+               for sel in ("search", "validation") for sc in scenes]
     baked = bake(results)
     found = search(baked)
     with jax.enable_x64(True):  # as the search
         _brute_force(baked, found, results)
+    assert found.winner[2] != 0  # not Shrinking's sizes
+    np.testing.assert_allclose(found.q[2, :, 0], found.q[0, :, 0], atol=0.01)
+    assert found.validation[2] > found.validation_shrunk[2]
 
 
 def _brute_force(baked, found, results):
@@ -108,13 +116,21 @@ def _brute_force(baked, found, results):
 
 
 def test_search_stays_in_bounds_and_beats_its_seeds(small_search):
+    """The chosen candidate is within the bounds and, on the validation starts, at least
+    as good as Shrinking's and the initial sizes (it is chosen there, ties to
+    Shrinking); the search's best on its own starts only grows."""
     _, baked, found = small_search
     assert np.all(found.q >= baked.q_min - 1e-6) and np.all(found.q <= baked.q_init + 1e-6)
     masked = ~baked.q_mask
     np.testing.assert_array_equal(found.q[masked], baked.q_init[masked])
-    assert np.all(found.objective >= np.maximum(found.objective_init, found.objective_shrunk))
+    assert np.all(found.validation >= np.maximum(found.validation_init,
+                                                 found.validation_shrunk))
+    shrunk = found.winner == 0
+    np.testing.assert_array_equal(found.q[shrunk], baked.q_shrunk[shrunk])
+    assert np.all(found.validation[~shrunk] > found.validation_shrunk[~shrunk])
     assert np.all(np.diff(found.history, axis=1) >= 0)
-    np.testing.assert_array_equal(found.history[:, -1], found.objective)
+    assert np.all(found.history[:, -1] >= found.objective - 1e-12)
+    assert np.all(found.history[:, 0] >= found.objective_shrunk - 1e-12)
 
 
 def test_objective_is_the_reference_automatons_success(small_search):
@@ -186,7 +202,12 @@ def test_optimize_command(tmp_path, capsys):
     assert set(opt["params"]) == set(d["tasks"])
     assert all(set(p) == {"radius"} for p in opt["params"].values())
     assert len(opt["objective"]["per_generation"]) == SMALL["optimize_generations"]
-    assert opt["objective"]["optimized"] >= opt["objective"]["shrinking"]
+    success = opt["success"]
+    assert set(success) == {"search", "validation", "held_out"}
+    assert success["validation"]["optimized"] >= success["validation"]["shrinking"]
+    assert success["held_out"]["optimized"] == d["modes"]["optimized"]["success_rate"]
+    assert opt["chosen"] == "shrinking" or opt["chosen"].startswith(("search #", "initial"))
+    assert "validation" in printed and "chosen:" in printed
     assert opt["settings"]["optimize_population"] == 8
     assert len(opt["search_starts"]) == SMALL["optimize_starts"]
     for task, p in opt["params"].items():
@@ -240,12 +261,64 @@ def test_cut_cuts_every_task_axis(shipped_results):
     """``cut`` takes scenes and their first n tasks: every array whose second axis is
     the tasks (by the bake's shapes, padded to 5 tasks) becomes n long there, and
     nothing else changes."""
-    baked = bake(shipped_results[:3], max_tasks=5)
+    baked = bake(shipped_results[:3], max_tasks=6)
     for tree in (Geometry, Params, SearchProblem):
         host = jax.tree.map(np.asarray, tree.from_bake(baked))
         got = cut(host, np.array([2, 0]), 3)
         for name, a, c in zip(tree._fields, host, got, strict=True):
-            task_axis = a.ndim >= 2 and a.shape[1] == 5
+            task_axis = a.ndim >= 2 and a.shape[1] == 6
             want = (2, 3, *a.shape[2:]) if task_axis else (2, *a.shape[1:])
             assert c.shape == want, (name, c.shape, want)
             np.testing.assert_array_equal(c[1], a[0][:3] if task_axis else a[0])
+
+
+ROW = {"name": "three-mugs-row", "objects": [
+    {"id": k, "kind": "mug", "position": [0.0, y, 0.0]}
+    for k, y in (("a", -0.21), ("b", 0.0), ("c", 0.21))],
+    "tasks": [{"id": f"g{k}", "object": k, "template": "side_grasp"} for k in "abc"],
+    "settings": {"start_grid": [16, 16]}}
+
+
+def test_the_optimized_mode_never_loses_to_a_perfect_shrinking_held_out():
+    """Three mugs in a row, 0.21 m apart: Shrinking already succeeds from every search
+    start. The earlier objective (``search``: ties to larger spaces) grows the radii
+    until neighbours overlap again where no search start looks, and loses on the
+    held-out grid; with validation (the default) the optimized mode must not lose."""
+    scene = scene_from_dict(ROW)
+    results = [precompute(scene, scene.settings(overrides={"optimize_selection": sel}))
+               for sel in ("search", "validation")]
+    ev, found = evaluate_baked(bake(results), ("shrinking", "optimized"))
+    u = ev.metrics.u_scene  # (scene, mode)
+    assert u[0, 0] == u[1, 0] == 1.0  # Shrinking: perfect on the held-out grid
+    assert found.objective_shrunk[0] == 1.0
+    assert u[0, 1] < u[0, 0]  # the earlier objective overfits and loses
+    assert u[1, 1] >= u[1, 0]  # never loses with validation
+    assert found.clutteredness[1] <= found.clutteredness[0]
+
+
+def test_validation_starts_are_neither_the_search_starts_nor_the_grid(small_search):
+    """Drawn on the start plane from their own seed (and their own stream: equal seeds
+    give other starts), the same on every call."""
+    results, baked, _ = small_search
+    pb = SearchProblem.from_bake(baked, np.float64)
+    with jax.enable_x64(True):
+        starts, mask = jax.vmap(lambda p: optimize.validation_starts(p, 256))(pb)
+    starts, mask = np.asarray(starts), np.asarray(mask)
+    assert mask.all() and starts.shape == (len(results), 256, 7)
+    for s in range(len(results)):
+        val = starts[s, :, :3]
+        opt = baked.opt_starts[s][baked.opt_start_mask[s]][:, :3]
+        grid = baked.starts[s, :, :3]
+        for other in (opt, grid):
+            gap = np.linalg.norm(val[:, None] - other[None], axis=-1).min()
+            assert gap > 1e-6
+        np.testing.assert_allclose(val[:, 0], grid[0, 0])
+        assert val[:, 1:].min(0).tolist() >= (grid[:, 1:].min(0) - 1e-12).tolist()
+        assert val[:, 1:].max(0).tolist() <= (grid[:, 1:].max(0) + 1e-12).tolist()
+    same_seed = bake([precompute(results[0].scene, results[0].settings.with_overrides(
+        {"optimize_seed": 5, "optimize_validation_seed": 5, **SMALL}))])
+    pb = SearchProblem.from_bake(same_seed, np.float64)
+    with jax.enable_x64(True):
+        val = np.asarray(optimize.validation_starts(jax.tree.map(lambda a: a[0], pb), 16)[0])
+    assert np.linalg.norm(val[:, None, :3] - same_seed.opt_starts[0][None, :, :3],
+                          axis=-1).min() > 1e-6
