@@ -155,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="precompute processes (default: one per CPU)")
     c.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786) instead of "
-                   "a local one; overrides the config's scheduler")
+                   "a local one; overrides the config's scheduler. A refused connection is an "
+                   "error at once; a scheduler that does not answer within 10 s, too")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func="runner:cmd_sweep")
 
