@@ -135,6 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random scenes (default 20; 4 with --quick)")
     c.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=0,
                    help="seeds the random scenes and bootstrap")
+    c.add_argument("--preset", default="paper", choices=["paper", "compact"],
+                   help="the random scenes' table area: paper (calibrated to the paper's "
+                   "C_init) or compact (0.6 m, the earlier geometry)")
     c.add_argument("--quick", action="store_true",
                    help="few random scenes, a coarse start grid, 200 bootstrap resamples")
     c.add_argument("--field-grid", type=_int_in(2, 1024), default=None,

@@ -12,6 +12,7 @@ over any setting of SPEC section 16, validated in full before any work starts.
     tasks = [5, 10]
     sampling = "both"                            # "uniform" | "gaussian" | "both"
     seed = 0
+    preset = "compact"                           # or "paper": the generator's table area
     # ... or scene files:  kind = "files"; path = "scenes/" (relative to this file)
 
     [settings]                                   # optional: fixed for every point
@@ -50,7 +51,7 @@ from geometry_precompute.scene import Scene, read_toml, scene_to_dict
 from geometry_precompute.settings import INT32_MAX, flatten_settings
 
 _TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}
-_RANDOM = {"kind", "count", "tasks", "sampling", "seed"}
+_RANDOM = {"kind", "count", "tasks", "sampling", "seed", "preset"}
 MAX_COUNT = 100_000_000  # random scenes in one sweep
 MAX_POINTS = 100_000     # sweep points (the point list is built, checked and stored)
 MAX_CHUNK = 1_000_000    # scenes per chunk
@@ -74,13 +75,17 @@ class SweepConfig:
             return [load_scene(p) for p in sorted(folder.glob("*.toml"))]
         return [random_scene(*self.random_ref(i)) for i in range(src["count"])]
 
-    def random_ref(self, i: int) -> tuple[int, str, int, int]:
+    def random_ref(self, i: int) -> tuple:
         """``random_scene``'s arguments for scene ``i`` of a random source: scenes are
-        built where they are precomputed, from these few numbers."""
+        built where they are precomputed, from these few numbers. The generator preset
+        is named only when it is not ``compact`` (the default), so that the precompute
+        cache keys of earlier sweeps stay valid."""
         src = self.source
         kinds = {"uniform": ["uniform"], "gaussian": ["gaussian"],
                  "both": ["uniform", "gaussian"]}[src["sampling"]]
-        return (src["seed"] + i, kinds[i % len(kinds)], *src["tasks"])
+        preset = src.get("preset", "compact")
+        ref = (src["seed"] + i, kinds[i % len(kinds)], *src["tasks"])
+        return ref if preset == "compact" else (*ref, preset)
 
     def n_scenes(self) -> int:
         src = self.source
@@ -179,8 +184,16 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         count = _int(raw.get("count"), src, "source.count", 1, MAX_COUNT)
         # Scene i is seeded seed + i: every seed stays a 32-bit integer.
         seed = _int(raw.get("seed", 0), src, "source.seed", 0, INT32_MAX - count + 1)
+        from geometry_precompute.generate import PRESETS
+
+        preset = raw.get("preset", "compact")
+        if not isinstance(preset, str) or preset not in PRESETS:
+            raise InputError(src, "source.preset", f"must be one of {', '.join(PRESETS)}, got "
+                             f"{shown(preset)}")
         source_out = {"kind": "random", "count": count,
                       "tasks": list(tasks), "sampling": sampling, "seed": seed}
+        if preset != "compact":  # the hash of a compact sweep stays what it was
+            source_out["preset"] = preset
     elif raw["kind"] == "files":
         for key in raw:
             if key not in _FILES:

@@ -13,6 +13,7 @@ caused are counted with JAX's monitoring events and reported.
 from __future__ import annotations
 
 import base64
+import functools
 import os
 import pickle
 import socket
@@ -42,8 +43,7 @@ class ChunkJob:
 @dataclass(frozen=True)
 class ChunkResult:
     index: int
-    scenes: bytes                  # Parquet file of the chunk's scene rows
-    rollouts: bytes                # Parquet file of its rollout rows
+    parts: dict                    # table name -> the Parquet file of the chunk's rows
     n_scenes: int
     n_rollouts: int
     precomputed: int               # scenes precomputed (not read from a cache)
@@ -146,6 +146,26 @@ def warm_up(job: ChunkJob, ref) -> dict:
 WARM_UP_MARKS: dict[str, float] = {}
 
 
+@functools.cache
+def _provenance() -> dict:
+    """What evaluated a chunk: software versions and the device, recorded in its parts."""
+    import importlib.metadata as md
+    import platform
+
+    import jax
+    import jaxlib
+
+    try:
+        shacc = md.version("shacc")
+    except md.PackageNotFoundError:
+        shacc = "unknown"
+    dev = jax.devices()[0]
+    return {"shacc": shacc, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
+            "numpy": np.__version__, "python": platform.python_version(),
+            "backend": jax.default_backend(), "device": getattr(dev, "device_kind", str(dev)),
+            "host": socket.gethostname()}
+
+
 def _warm_up(job: ChunkJob, ref) -> dict:
     WARM_UP_MARKS.clear()
     WARM_UP_MARKS["begun"] = time.time()
@@ -182,8 +202,10 @@ class ChunkArrays:
     the evaluation worker to the CPU worker that makes its tables."""
 
     rollouts: list        # per point: outcome, activated, step, delta_R (S, M, N, T)
-    labels: dict          # per scene: name, n_tasks, C_init, C_final, d, h
+    params: list          # per point: q_min, q_init, q_shrunk, q_optimized, starts
+    labels: dict          # per scene: name, n_tasks, C_init, ...; per task: ids, templates
     counts: dict          # precomputed, cache_hits
+    provenance: dict      # the evaluation worker's software and device
     seconds: dict
     compiled: int
     loaded: int
@@ -232,11 +254,14 @@ def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}
-                for ev in evs]
+                for ev, _ in evs]
+    params = [{"q_min": b.q_min[:S], "q_init": b.q_init[:S], "q_shrunk": b.q_shrunk[:S],
+               "q_optimized": None if found is None else np.asarray(found.q)[:S],
+               "starts": b.starts[:S]} for b, (_, found) in zip(joined.bakes, evs, strict=True)]
     t2 = time.perf_counter()
     programs = _COUNTS["programs"] - before["programs"]
     loaded = _COUNTS["loaded"] - before["loaded"]
-    return ChunkArrays(rollouts, joined.labels, joined.counts,
+    return ChunkArrays(rollouts, params, joined.labels, joined.counts, _provenance(),
                        {**joined.seconds, "evaluate": t2 - t1},
                        programs - loaded, loaded, f"{socket.gethostname()}:{os.getpid()}")
 
@@ -248,20 +273,26 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
     from geometry_precompute.outcomes import scene_metrics
 
     t0 = time.perf_counter()
-    scenes, rollouts = [], []
+    parts: dict[str, list] = {name: [] for name in tables.TABLES}
     S = len(job.chunk.scenes)
     n_tasks = np.asarray(arrays.labels["n_tasks"])
     task_mask = np.arange(job.shapes.tasks)[None, :] < n_tasks[:, None]
-    for i, p, ro in zip(job.chunk.points, job.points, arrays.rollouts, strict=True):
+    for i, p, ro, pa_ in zip(job.chunk.points, job.points, arrays.rollouts, arrays.params,
+                             strict=True):
         u, mean, counts, _ = scene_metrics(ro["outcome"], ro["delta_R"], task_mask[:S])
         me = SimpleNamespace(u_scene=u, delta_R_mean=mean, outcome_counts=counts)
-        scenes.append(tables.scenes_table(i, p, job.setting_names, job.modes,
-                                          job.chunk.scenes, arrays.labels, me))
-        rollouts.append(tables.rollouts_table(i, job.modes, job.chunk.scenes,
-                                              SimpleNamespace(**ro)))
-    scenes_t, rollouts_t = pa.concat_tables(scenes), pa.concat_tables(rollouts)
-    out_s, out_r = tables.parquet_bytes(scenes_t), tables.parquet_bytes(rollouts_t)
-    return ChunkResult(job.chunk.index, out_s, out_r, scenes_t.num_rows, rollouts_t.num_rows,
+        parts["scenes"].append(tables.scenes_table(i, p, job.setting_names, job.modes,
+                                                   job.chunk.scenes, arrays.labels, me))
+        parts["tasks"].append(tables.tasks_table(i, job.modes, job.chunk.scenes, arrays.labels,
+                                                 pa_, ro["outcome"]))
+        parts["starts"].append(tables.starts_table(i, job.chunk.scenes, pa_["starts"]))
+        parts["rollouts"].append(tables.rollouts_table(i, job.modes, job.chunk.scenes,
+                                                       SimpleNamespace(**ro)))
+    joined = {name: pa.concat_tables(ts) for name, ts in parts.items()}
+    encoded = {name: tables.parquet_bytes(t, name, arrays.provenance)
+               for name, t in joined.items()}
+    return ChunkResult(job.chunk.index, encoded, joined["scenes"].num_rows,
+                       joined["rollouts"].num_rows,
                        arrays.counts["precomputed"], arrays.counts["cache_hits"],
                        arrays.counts["cache_warning"],
                        {**arrays.seconds, "tables": time.perf_counter() - t0},

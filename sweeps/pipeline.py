@@ -89,25 +89,26 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
 
 
 def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str],
-                    fields: Sequence[str] | None = None,
-                    metrics: bool = True) -> list[Evaluation]:
+                    fields: Sequence[str] | None = None, metrics: bool = True
+                    ) -> list[tuple[Evaluation, Search | None]]:
     """Bakes of the same scenes that differ only in rollout settings (Params), evaluated
     as one call with a points axis; NumPy results, one Evaluation per bake. The
     optimized mode searches per bake (its search depends on the rollout settings).
     ``fields``: the Rollouts fields to copy to the host, the others None (default all;
     ``shacc_jax.evaluate_on_devices``). ``metrics`` False leaves the per-scene metrics
-    None (a sweep computes them on a CPU worker, ``shacc_jax.host_metrics``)."""
+    None (a sweep computes them on a CPU worker, ``shacc_jax.host_metrics``). Returns
+    (Evaluation, the optimized mode's search or None) per bake."""
     run = shacc_jax.evaluate_on_devices if fields is None else \
         partial(shacc_jax.evaluate_on_devices, fields=fields)
     if len(bakes) == 1 or OPTIMIZED in modes:
-        return [evaluate_baked(b, modes, run, metrics=metrics)[0] for b in bakes]
+        return [evaluate_baked(b, modes, run, metrics=metrics) for b in bakes]
     for b in bakes[1:]:  # a grouping error would evaluate one point on another's spaces
         for name in GEOMETRY_FIELDS:
             if not np.array_equal(getattr(b, name), getattr(bakes[0], name)):
                 raise RuntimeError(f"sweep points grouped together differ in {name}")
     ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), run, params=[
         shacc_jax.Params.from_bake(b) for b in bakes], metrics=metrics)
-    return [jax.tree.map(lambda a, i=i: a[i], ev) for i in range(len(bakes))]
+    return [(jax.tree.map(lambda a, i=i: a[i], ev), None) for i in range(len(bakes))]
 
 
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,

@@ -17,6 +17,18 @@ MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c"
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
 
 
+def _figure(ax, n: int = 1, figsize=(4.8, 3.4), **kw):
+    """(figure, axes) to draw ``n`` panels on: new ones, or the caller's ``ax`` (one
+    Axes, or a sequence of n), so that every helper's figure composes into panels."""
+    if ax is None:
+        fig, axes = plt.subplots(1, n, figsize=figsize, squeeze=False, **kw)
+        return fig, list(axes.ravel())
+    axes = list(np.atleast_1d(ax).ravel())
+    if len(axes) != n:
+        raise ValueError(f"this figure needs {n} axes, got {len(axes)}")
+    return axes[0].figure, axes
+
+
 def _save(fig, path):
     """Write the figure to ``path`` (PNG unless its suffix says otherwise), atomically
     (``fileio.write_atomic``): a full disk or Ctrl-C leaves no half picture."""
@@ -33,36 +45,37 @@ def _save(fig, path):
     return fig
 
 
-def correlation_panels(u: np.ndarray, measures: dict, correlations: dict, path=None):
+def correlation_panels(u: np.ndarray, measures: dict, correlations: dict, path=None,
+                       ax=None):
     """Fig. 6a: baseline u_scene against each measure, with a least-squares line and
-    rho with its bootstrap CI in the title."""
-    fig, axes = plt.subplots(1, len(measures), figsize=(4.2 * len(measures), 3.6),
-                             sharey=True)
-    for ax, (name, x) in zip(np.atleast_1d(axes), measures.items(), strict=True):
+    rho with its bootstrap CI in the title. ``ax``: one Axes per measure."""
+    fig, axes = _figure(ax, len(measures), (4.2 * len(measures), 3.6), sharey=True)
+    for a, (name, x) in zip(axes, measures.items(), strict=True):
         x = np.asarray(x, float)
-        ax.scatter(x, u, s=18, alpha=0.8)
+        a.scatter(x, u, s=18, alpha=0.8)
         if np.ptp(x) > 0:
             slope, intercept = np.polyfit(x, u, 1)
             xs = np.linspace(x.min(), x.max(), 50)
-            ax.plot(xs, slope * xs + intercept, color="k", lw=1)
+            a.plot(xs, slope * xs + intercept, color="k", lw=1)
         c = correlations.get(name, {})
         if c.get("rho") is not None:
             ci = c.get("ci") or [np.nan, np.nan]
-            ax.set_title(f"{name}: rho = {c['rho']:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]")
+            a.set_title(f"{name}: rho = {c['rho']:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]")
         else:
-            ax.set_title(f"{name}: rho undefined")
-        ax.set_xlabel(name)
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("u_scene (baseline)")
-    fig.tight_layout()
+            a.set_title(f"{name}: rho undefined")
+        a.set_xlabel(name)
+        a.grid(alpha=0.3)
+    axes[0].set_ylabel("u_scene (baseline)")
+    if ax is None:
+        fig.tight_layout()
     return _save(fig, path)
 
 
 def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None,
-                  ylabel: str | None = None):
+                  ylabel: str | None = None, ax=None):
     """Fig. 6b-d: per category and mode, the mean of ``metric`` with CI error bars."""
     names = [c for c in categories if categories[c]["n_scenes"] > 0]
-    fig, ax = plt.subplots(figsize=(1.6 * len(names) + 2, 3.4))
+    fig, (a,) = _figure(ax, 1, (1.6 * len(names) + 2, 3.4))
     width = 0.8 / len(modes)
     for k, mode in enumerate(modes):
         means, errs = [], [[], []]
@@ -74,42 +87,49 @@ def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None
             errs[0].append(max(m - lo, 0.0) if np.isfinite(m) else 0.0)
             errs[1].append(max(hi - m, 0.0) if np.isfinite(m) else 0.0)
         xs = np.arange(len(names)) + (k - (len(modes) - 1) / 2) * width
-        ax.bar(xs, means, width, yerr=errs, capsize=3, label=mode,
-               color=MODE_COLORS.get(mode))
-    ax.set_xticks(np.arange(len(names)), names)
-    ax.set_ylabel(ylabel or metric)
-    ax.legend(fontsize=8)
-    ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
+        a.bar(xs, means, width, yerr=errs, capsize=3, label=mode,
+              color=MODE_COLORS.get(mode))
+    a.set_xticks(np.arange(len(names)), names)
+    a.set_ylabel(ylabel or metric)
+    a.legend(fontsize=8)
+    a.grid(axis="y", alpha=0.3)
+    if ax is None:
+        fig.tight_layout()
     return _save(fig, path)
 
 
 def success_fields(outcome: np.ndarray, grid: tuple[int, int], y_range, z_range,
                    task_names: Sequence[str], modes: Sequence[str], path=None,
-                   title: str | None = None):
+                   title: str | None = None, ax=None):
     """Fig. 7: per task (columns) and mode (rows), the outcome of the rollout from each
-    start of the grid. ``outcome`` is (modes, starts, tasks) with starts y-major."""
+    start of the grid. ``outcome`` is (modes, starts, tasks) with starts y-major.
+    ``ax``: modes x tasks Axes (row by row)."""
     ny, nz = grid
     M, _, T = outcome.shape
-    fig, axes = plt.subplots(M, T, figsize=(3.0 * T, 2.8 * M), squeeze=False)
+    if ax is None:
+        fig, axes = plt.subplots(M, T, figsize=(3.0 * T, 2.8 * M), squeeze=False)
+    else:
+        fig, flat = _figure(ax, M * T)
+        axes = np.array(flat, dtype=object).reshape(M, T)
     cmap = ListedColormap(OUTCOME_COLORS)
     for m in range(M):
         for t in range(T):
             field = outcome[m, :, t].reshape(ny, nz).T  # rows z, columns y
-            ax = axes[m, t]
-            ax.imshow(field, origin="lower", cmap=cmap, vmin=-0.5, vmax=4.5,
-                      extent=(y_range[0], y_range[1], z_range[0], z_range[1]), aspect="auto")
+            a = axes[m, t]
+            a.imshow(field, origin="lower", cmap=cmap, vmin=-0.5, vmax=4.5,
+                     extent=(y_range[0], y_range[1], z_range[0], z_range[1]), aspect="auto")
             rate = float(np.mean(outcome[m, :, t] == 0))
-            ax.set_title(f"{modes[m]}: {task_names[t]} ({100 * rate:.0f} %)", fontsize=9)
-            ax.set_xlabel("y (m)")
+            a.set_title(f"{modes[m]}: {task_names[t]} ({100 * rate:.0f} %)", fontsize=9)
+            a.set_xlabel("y (m)")
             if t == 0:
-                ax.set_ylabel("z (m)")
+                a.set_ylabel("z (m)")
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in OUTCOME_COLORS[:4]]
     fig.legend(handles, ["success", "wrong", "ambiguous", "timeout"], loc="lower center",
                ncol=4, fontsize=8)
     if title:
         fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    if ax is None:
+        fig.tight_layout(rect=(0, 0.05, 1, 1))
     return _save(fig, path)
 
 
@@ -184,13 +204,18 @@ def space_shadows_yz(shapes, sections: int = 32) -> list[np.ndarray]:
 
 
 def success_fields_with_spaces(outcome: np.ndarray, delta_r: np.ndarray, grid, y_range,
-                               z_range, result, modes: Sequence[str], path=None):
+                               z_range, result, modes: Sequence[str], path=None, ax=None):
     """Fig. 7 with more: per task (columns) the outcome field of each mode (rows, outcome
     kinds coloured), the initial (red) and optimised (blue) spaces seen from the start
-    plane, and a last row with ShaCC's delta_R field over its successes."""
+    plane, and a last row with ShaCC's delta_R field over its successes. ``ax``:
+    (modes + 1) x tasks Axes (row by row)."""
     ny, nz = grid
     M, _, T = outcome.shape
-    fig, axes = plt.subplots(M + 1, T, figsize=(3.0 * T, 2.6 * (M + 1)), squeeze=False)
+    if ax is None:
+        fig, axes = plt.subplots(M + 1, T, figsize=(3.0 * T, 2.6 * (M + 1)), squeeze=False)
+    else:
+        fig, flat = _figure(ax, (M + 1) * T)
+        axes = np.array(flat, dtype=object).reshape(M + 1, T)
     cmap = ListedColormap(OUTCOME_COLORS)
     extent = (y_range[0], y_range[1], z_range[0], z_range[1])
     shadows_init = space_shadows_yz(result.shapes_init)
@@ -216,79 +241,127 @@ def success_fields_with_spaces(outcome: np.ndarray, delta_r: np.ndarray, grid, y
             ax.set_xlim(extent[0], extent[1])
             ax.set_ylim(extent[2], extent[3])
             ax.tick_params(labelsize=7)
-    fig.colorbar(im, ax=axes[M, :].tolist(), shrink=0.8, label="delta_R (rad)")
+    fig.colorbar(im, ax=list(axes[M, :]), shrink=0.8, label="delta_R (rad)")
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in OUTCOME_COLORS[:4]]
     fig.legend(handles, ["success", "wrong", "ambiguous", "timeout"], loc="upper center",
                ncol=4, fontsize=8)
     return _save(fig, path)
 
 
-def scene_gallery(results, columns: int = 4, path=None):
-    """Top-down views of several scenes (initial red, optimised blue, clusters)."""
-    rows = -(-len(results) // columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(3.3 * columns, 3.4 * rows), squeeze=False)
-    for ax, r in zip(axes.ravel(), results, strict=False):
-        scene_top_view(r, ax=ax)
-    for ax in axes.ravel()[len(results):]:
-        ax.axis("off")
-    fig.tight_layout()
+def scene_gallery(results, columns: int = 4, path=None, ax=None):
+    """Top-down views of several scenes (initial red, optimised blue, clusters).
+    ``ax``: one Axes per scene."""
+    if ax is None:
+        rows = -(-len(results) // columns)
+        fig, axes = plt.subplots(rows, columns, figsize=(3.3 * columns, 3.4 * rows),
+                                 squeeze=False)
+        axes = list(axes.ravel())
+    else:
+        fig, axes = _figure(ax, len(results))
+    for a, r in zip(axes, results, strict=False):
+        scene_top_view(r, ax=a)
+    for a in axes[len(results):]:
+        a.axis("off")
+    if ax is None:
+        fig.tight_layout()
     return _save(fig, path)
 
 
-def _ci_by_group(df, by: str, column: str, n_resamples: int, seed: int) -> list[dict]:
-    from .stats import mean_ci
-
+def swept_axes(scenes_df, exclude: Sequence[str] = ()) -> list[str]:
+    """The settings a sweep's scenes table varies (``set.NAME`` columns with more than
+    one value), by name."""
     out = []
-    for value, g in df.groupby(by, sort=True):
-        out.append({"value": value, **mean_ci(g[column].to_numpy(), n_resamples, seed)})
+    for col in scenes_df.columns:
+        if col.startswith("set.") and col[4:] not in exclude:
+            if scenes_df[col].map(_label).nunique(dropna=False) > 1:
+                out.append(col[4:])
     return out
 
 
+def _label(v) -> str:
+    """A swept value as a label (a list such as a start grid included)."""
+    if isinstance(v, list | tuple | np.ndarray):
+        return "[" + ", ".join(_label(x) for x in v) + "]"
+    if isinstance(v, float | np.floating):
+        return f"{float(v):g}"
+    return str(v)
+
+
 def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=None,
-                n_resamples: int = 2000, seed: int = 0):
-    """``metric`` ("success" or "delta_R_mean") against one swept setting, per mode,
-    mean over scenes with bootstrap CIs. ``axis`` is a setting name; the table's
-    column is ``set.<axis>``."""
+                n_resamples: int = 2000, seed: int = 0, others: str = "lines", ax=None):
+    """``metric`` ("success" or "delta_R_mean") against one swept setting, per mode:
+    the mean over scenes with a 95 % bootstrap CI over scenes (``sweeps.stats``).
+    ``axis`` is a setting name (the table's column ``set.<axis>``).
+
+    The other settings the sweep varies are never pooled silently: with ``others =
+    "lines"`` each combination of their values is a line of its own (colour per mode,
+    line style per combination); with ``"marginalise"`` one line per mode averages each
+    scene over the other settings first and resamples the scenes as clusters, which
+    the title says. Both give scene-level intervals."""
+    from .stats import group_means
+
     col = f"set.{axis}"
     df = scenes_df.copy()
-    df["_x"] = df[col].map(lambda v: float(v) if _is_number(v) else v)
-    fig, ax = plt.subplots(figsize=(4.8, 3.4))
+    other = swept_axes(df, exclude=[axis])
+    df["_x"] = df[col].map(lambda v: float(v) if _is_number(v) else _label(v))
+    df["_combo"] = df[[f"set.{o}" for o in other]].apply(
+        lambda r: ", ".join(f"{o}={_label(v)}" for o, v in zip(other, r, strict=True)), axis=1) \
+        if other and others == "lines" else ""
+    fig, (a,) = _figure(ax)
+    styles = ["-", "--", ":", "-."]
+    combos = sorted(df["_combo"].unique())
     for mode in modes:
-        pts = _ci_by_group(df, "_x", f"{mode}.{metric}", n_resamples, seed)
-        xs = [p["value"] for p in pts]
-        ms = np.array([np.nan if p["mean"] is None else p["mean"] for p in pts])
-        lo = np.array([m if p["ci"] is None else p["ci"][0] for p, m in zip(pts, ms, strict=True)])
-        hi = np.array([m if p["ci"] is None else p["ci"][1] for p, m in zip(pts, ms, strict=True)])
-        ax.errorbar(xs, ms, yerr=[ms - lo, hi - ms], marker="o", capsize=3, label=mode,
-                    color=MODE_COLORS.get(mode))
-    ax.set_xlabel(axis)
-    ax.set_ylabel(metric)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
+        for k, combo in enumerate(combos):
+            g = df[df["_combo"] == combo]
+            pts = group_means(g, ["_x"], f"{mode}.{metric}", n_resamples, seed,
+                              marginalise=other if others == "marginalise" else None)
+            xs = [p["_x"] for p in pts]
+            ms = np.array([np.nan if p["mean"] is None else p["mean"] for p in pts])
+            lo = np.array([m if p["ci"] is None else p["ci"][0]
+                           for p, m in zip(pts, ms, strict=True)])
+            hi = np.array([m if p["ci"] is None else p["ci"][1]
+                           for p, m in zip(pts, ms, strict=True)])
+            label = mode if not combo else f"{mode}, {combo}"
+            a.errorbar(xs, ms, yerr=[ms - lo, hi - ms], marker="o", capsize=3, label=label,
+                       color=MODE_COLORS.get(mode), ls=styles[k % len(styles)])
+    a.set_xlabel(axis)
+    a.set_ylabel(metric)
+    if other and others == "marginalise":
+        a.set_title(f"mean over {', '.join(other)} (scenes resampled as clusters)",
+                    fontsize=8)
+    a.legend(fontsize=6 if len(combos) > 2 else 8)
+    a.grid(alpha=0.3)
+    if ax is None:
+        fig.tight_layout()
     return _save(fig, path)
 
 
-def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, path=None):
-    """Mean ``metric`` of ``mode`` over scenes, for a two-axis sweep."""
+def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, path=None,
+                  ax=None):
+    """Mean ``metric`` of ``mode`` over scenes at each point of a two-axis sweep (each
+    cell one point: its own scenes). Other swept settings must be fixed first (a
+    table with repeated scenes in a cell is refused)."""
     df = scenes_df.copy()
-    for a in (axis_x, axis_y):
-        df[a] = df[f"set.{a}"].map(lambda v: float(v) if _is_number(v) else v)
+    for a_ in (axis_x, axis_y):
+        df[a_] = df[f"set.{a_}"].map(lambda v: float(v) if _is_number(v) else _label(v))
+    if df.duplicated([axis_x, axis_y, "scene_index"]).any():
+        rest = ", ".join(swept_axes(scenes_df, [axis_x, axis_y]))
+        raise ValueError(f"cells of {axis_x} x {axis_y} repeat scenes: select one value of "
+                         f"the other swept settings ({rest}) first")
     table = df.pivot_table(index=axis_y, columns=axis_x, values=f"{mode}.{metric}",
                            aggfunc="mean")
-    fig, ax = plt.subplots(figsize=(4.8, 3.8))
-    im = ax.imshow(table.to_numpy(), origin="lower", cmap="viridis", aspect="auto")
-    ax.set_xticks(range(table.shape[1]), [f"{v:g}" if _is_number(v) else str(v)
-                                          for v in table.columns])
-    ax.set_yticks(range(table.shape[0]), [f"{v:g}" if _is_number(v) else str(v)
-                                          for v in table.index])
+    fig, (a,) = _figure(ax, 1, (4.8, 3.8))
+    im = a.imshow(table.to_numpy(), origin="lower", cmap="viridis", aspect="auto")
+    a.set_xticks(range(table.shape[1]), [_label(v) for v in table.columns])
+    a.set_yticks(range(table.shape[0]), [_label(v) for v in table.index])
     for (i, j), v in np.ndenumerate(table.to_numpy()):
-        ax.text(j, i, f"{v:.2f}", ha="center", va="center", color="w", fontsize=8)
-    ax.set_xlabel(axis_x)
-    ax.set_ylabel(axis_y)
-    ax.set_title(f"{mode}: {metric}")
-    fig.colorbar(im, ax=ax)
-    fig.tight_layout()
+        a.text(j, i, f"{v:.2f}", ha="center", va="center", color="w", fontsize=8)
+    a.set_xlabel(axis_x)
+    a.set_ylabel(axis_y)
+    a.set_title(f"{mode}: {metric}")
+    fig.colorbar(im, ax=a)
+    if ax is None:
+        fig.tight_layout()
     return _save(fig, path)
 
 

@@ -8,9 +8,10 @@ evaluation worker) and a task that makes its tables (``evaluation_worker.encode_
 on a CPU worker), keeping a bounded number of chunks in flight: while one chunk is
 evaluated, later scenes are being precomputed, and memory on the client and on each
 worker stays bounded by the chunk size and the cluster, whatever the sweep's size.
-Each chunk's two Parquet parts come back as bytes; the client alone writes ``OUT``.
+Each chunk's Parquet parts (one per table, ``tables.TABLES``) come back as bytes; the
+client alone writes ``OUT``.
 
-A chunk's parts are written atomically, the rollouts part first, and a chunk counts
+A chunk's parts are written atomically, the scenes part last, and a chunk counts
 as done when its scenes part exists: a run killed at any moment (SIGKILL included)
 leaves whole chunks only (and perhaps a temporary file, which the rerun deletes),
 and the rerun does the rest. A worker lost mid-task is replaced and its task rerun
@@ -60,7 +61,7 @@ DRY_RUN_EXACT = 100_000
 LOOKAHEAD = 1024
 
 # What a sweep writes into its output folder; a folder holding anything else is refused.
-TABLES = ("scenes", "rollouts")
+TABLES = tables.TABLES
 SWEEP_FILES = ("config.json", *TABLES, ".*.tmp", ".lock")
 
 
@@ -151,7 +152,7 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
 
 def _check_folder_kinds(out: Path) -> None:
     """What a sweep writes into ``out`` is of the kind it writes: ``.lock`` and
-    ``config.json`` files, ``scenes`` and ``rollouts`` folders."""
+    ``config.json`` files, a folder per table."""
     kinds = {".lock": False, "config.json": False, **dict.fromkeys(TABLES, True)}
     for name, folder in kinds.items():
         p = out / name
@@ -197,7 +198,27 @@ def _check_marker(out: Path, cfg: SweepConfig, h: str, write: bool = True) -> No
             raise InputError(out, "config", f"this folder holds another sweep (hash "
                              f"{previous.get('hash')}, this config {h}); use a new --out")
     elif write:
-        write_json(marker, {"hash": h, "config": cfg.resolved()})
+        write_json(marker, {"hash": h, "config": cfg.resolved(), "provenance": provenance()})
+
+
+def provenance() -> dict:
+    """Who ran a sweep or an evaluation, how: the command line, this installation's
+    versions, the machine and the time (the evaluation workers add the device's in
+    each Parquet part)."""
+    import datetime
+    import importlib.metadata as md
+    import platform
+
+    versions = {}
+    for name in ("shacc", "jax", "jaxlib", "numpy", "scipy", "pyarrow", "dask", "distributed"):
+        try:
+            versions[name] = md.version(name)
+        except md.PackageNotFoundError:
+            versions[name] = None
+    return {"command": " ".join(["shacc", *sys.argv[1:]]), "versions": versions,
+            "python": platform.python_version(), "platform": platform.platform(),
+            "host": platform.node(),
+            "time": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
 
 
 def _setting_names(cfg: SweepConfig) -> tuple[str, ...]:
@@ -392,8 +413,9 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             c, _ = flying.pop(fut.key)
             res = fut.result()
             t = time.perf_counter()
-            write_atomic(tables.part_path(out, "rollouts", c.index), res.rollouts)
-            write_atomic(tables.part_path(out, "scenes", c.index), res.scenes)
+            # The scenes part last: it marks the chunk done (module docstring).
+            for name in (*(t for t in TABLES if t != "scenes"), "scenes"):
+                write_atomic(tables.part_path(out, name, c.index), res.parts[name])
             busy["write"] += time.perf_counter() - t
             for k, v in res.seconds.items():
                 busy[k] += v

@@ -120,16 +120,32 @@ def bake_batch(got: list[tuple[PrecomputeResult, bool]], points: list[dict], tas
                   max_objects=objects) for k in range(len(points))]
     results = [r for r, _ in got]
     hits = sum(hit for _, hit in got)
-    return Batch(bakes, {"name": [r.scene.name for r in results],
-                         "n_tasks": [len(r.spaces) for r in results],
-                         **{k: [getattr(r, k) for r in results]
-                            for k in ("C_init", "C_final", "d", "h")}},
-                 len(got) - hits, hits, seconds + time.perf_counter() - t0)
+    return Batch(bakes, scene_labels(results), len(got) - hits, hits,
+                 seconds + time.perf_counter() - t0)
+
+
+def scene_labels(results: list[PrecomputeResult]) -> dict[str, list]:
+    """What the tables say of each scene and its tasks beside the arrays: per scene its
+    name, task count, C_init, C_final, d, h, and per task its id, object, object kind,
+    template and parameter names."""
+    def per_task(get):
+        return [[get(r, t, sp) for t, sp in zip(r.scene.tasks, r.spaces, strict=True)]
+                for r in results]
+
+    return {"name": [r.scene.name for r in results],
+            "n_tasks": [len(r.spaces) for r in results],
+            **{k: [getattr(r, k) for r in results] for k in ("C_init", "C_final", "d", "h")},
+            "task_ids": per_task(lambda r, t, sp: t.id),
+            "object_ids": per_task(lambda r, t, sp: t.object),
+            "object_kinds": per_task(lambda r, t, sp: r.scene.object(t.object).kind),
+            "templates": per_task(lambda r, t, sp: t.template),
+            "param_names": per_task(lambda r, t, sp: list(sp.param_names))}
 
 
 def precompute_scene(item) -> PrecomputeResult:
     """``reproduce``'s task: ("manual", path, overrides) or ("random", (seed, kind),
     overrides)."""
     kind, ref, overrides = item
-    scene = load_scene(ref) if kind == "manual" else random_scene(ref[0], ref[1], 5, 10)
+    scene = load_scene(ref) if kind == "manual" else random_scene(ref[0], ref[1], 5, 10,
+                                                                  *ref[2:])
     return precompute(scene, scene.settings(DEFAULTS, overrides))

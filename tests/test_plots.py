@@ -73,5 +73,21 @@ def test_sweep_plots():
     df = pd.DataFrame(rows)
     fig = plots.sweep_lines(df, "v_max", "success", ("baseline", "shacc"))
     assert fig.axes[0].get_xlabel() == "v_max"
+    # The other swept setting is never pooled: a line per mode and value of shrink_step...
+    labels = sorted(t.get_text() for t in fig.axes[0].get_legend().get_texts())
+    assert labels == ["baseline, shrink_step=0.05", "baseline, shrink_step=0.1",
+                      "shacc, shrink_step=0.05", "shacc, shrink_step=0.1"]
+    # ... or, asked for, averaged within each scene and said so.
+    fig = plots.sweep_lines(df, "v_max", "success", ("shacc",), others="marginalise")
+    assert "mean over shrink_step" in fig.axes[0].get_title()
+    line = fig.axes[0].lines[0]
+    np.testing.assert_allclose(line.get_ydata(), [0.175, 0.275])
     fig = plots.sweep_heatmap(df, "v_max", "shrink_step", "success", "shacc")
     np.testing.assert_allclose(fig.axes[0].images[0].get_array(), [[0.15, 0.25], [0.2, 0.3]])
+    # Every helper draws into a caller's axes (panels of one figure).
+    import matplotlib.pyplot as plt
+
+    panel, axes = plt.subplots(1, 2)
+    plots.sweep_lines(df, "v_max", "success", ("shacc",), ax=axes[0])
+    plots.sweep_heatmap(df, "v_max", "shrink_step", "success", "shacc", ax=axes[1])
+    assert axes[0].lines and axes[1].images and len(panel.axes) == 3  # + the colour bar

@@ -149,7 +149,7 @@ def test_only_the_named_fields_reach_the_host(shipped_results):
     per_start = bytes_per_rollout(False) * baked.n_scenes * baked.n_tasks * 3
     one = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=2**40)
     pieces = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=per_start * 10)
-    two_points = evaluate_points([baked, baked], shacc_jax.MODES, keep)
+    two_points = [ev for ev, _ in evaluate_points([baked, baked], shacc_jax.MODES, keep)]
     for got in (one, pieces, *two_points):
         for name in whole.rollouts._fields:
             a, b = getattr(whole.rollouts, name), getattr(got.rollouts, name)

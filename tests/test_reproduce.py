@@ -46,6 +46,13 @@ def test_summary_keys(quick_run):
                           "search_objective"}
     assert set(scene["shacc"]) == {"u_scene", "delta_R_mean"}
     assert s["settings"]["software"]["jax"] and s["settings"]["bootstrap_resamples"] == 200
+    assert s["settings"]["preset"] == "paper" and "random-paper-" in s["scenes"][-1]["name"]
+    # Every claim of the paper's Fig. 6 text, beside ours and a verdict by a stated rule.
+    ids = [c["id"] for c in s["claims"]]
+    assert {"rho_C", "u_cinit_pos", "dr_cinit_pos", "c_init_sparse", "u_sparse"} <= set(ids)
+    for c in s["claims"]:
+        assert c["holds"] in ("holds", "does not hold", "n/a") and c["paper"] and c["rule"]
+    assert {"C_given_tasks", "tasks"} <= set(s["partial_correlation"])
 
 
 def test_what_the_numbers_must_show(quick_run):
@@ -66,7 +73,8 @@ def test_what_the_numbers_must_show(quick_run):
 def test_report_figures_and_readme(quick_run):
     out, readme = quick_run
     report = (out / "report.md").read_text()
-    assert "| rho(C, u_scene baseline) | -0.53 [-0.72, -0.27] |" in report
+    assert "| C correlates negatively with baseline success | -0.53 [-0.72, -0.27] |" in report
+    assert "partial correlation" in report
     assert "**(c) success rate u_scene**" in report
     assert "| category | n | baseline | shrinking | shacc | optimized |" in report
     assert "How far is Shrinking from the best sizes?" in report
@@ -76,4 +84,4 @@ def test_report_figures_and_readme(quick_run):
         assert png.stat().st_size > 5000
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = readme.read_text()
-    assert "old" not in text and text.endswith("tail\n") and "Pearson" in text
+    assert "\nold\n" not in text and text.endswith("tail\n") and "Pearson" in text

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pytest
 from conftest import StartedCluster, process_group_members
 
@@ -126,6 +127,59 @@ def test_tables_and_values(finished):
                    (rollouts["mode"] == "shacc")].sort_values(["start", "task"])
     np.testing.assert_array_equal(sub.steps.to_numpy(),
                                   np.asarray(ev.rollouts.step[0, 2]).ravel())
+
+
+def test_the_dataset_reads_the_same_typed_everywhere(finished):
+    """The four tables read alike with pyarrow.dataset, pandas, polars and DuckDB: typed
+    swept settings (a float, a list), task and start identities that join the rollouts,
+    and every column described in the parts' own metadata."""
+    import duckdb
+    import polars as pl
+    import pyarrow.dataset as ds
+    import pyarrow.parquet as pq
+
+    from sweeps.tables import COLUMNS, TABLES
+
+    _, out, _, _ = finished
+    con = duckdb.connect()
+
+    def sql(query):
+        return con.execute(query).fetchall()
+
+    for name in TABLES:
+        arrow = ds.dataset(out / name).to_table()
+        frame = pd.read_parquet(out / name)
+        polar = pl.read_parquet(str(out / name / "*.parquet"))
+        rel = con.sql(f"select * from read_parquet('{out / name}/*.parquet')")
+        duck = rel.to_arrow_table() if hasattr(rel, "to_arrow_table") else rel.arrow()
+        assert arrow.column_names == list(frame.columns) == polar.columns == duck.column_names
+        assert arrow.num_rows == len(frame) == polar.height == duck.num_rows
+        meta = pq.read_schema(next((out / name).glob("*.parquet"))).metadata
+        described = json.loads(meta[b"shacc.columns"])
+        assert described.keys() == COLUMNS[name].keys()
+        assert json.loads(meta[b"shacc.provenance"])["backend"] == "cpu"
+        for col in arrow.column_names:  # every column is described (NAME, MODE patterns)
+            pattern = col if col in described else "set.NAME" if col.startswith("set.") else \
+                "MODE." + ("n_OUTCOME" if ".n_" in col else col.split(".", 1)[1])
+            assert pattern in described, col
+    scenes = ds.dataset(out / "scenes").to_table()
+    assert scenes.schema.field("set.v_max").type == pa.float64()
+    assert scenes.schema.field("set.start_grid").type == pa.list_(pa.int64())
+    assert pl.read_parquet(str(out / "scenes" / "*.parquet"))["set.v_max"].dtype == pl.Float64
+    assert sql(f"select typeof(\"set.start_grid\") from read_parquet("
+               f"'{out}/scenes/*.parquet') limit 1")[0][0] == "BIGINT[]"
+    # The rollouts join their task and start rows by the documented keys.
+    joined = sql(f"""
+        select count(*), count(t.task_id), count(s.x), count(distinct t.template)
+        from read_parquet('{out}/rollouts/*.parquet') r
+        join read_parquet('{out}/tasks/*.parquet') t using (point, scene_index, task)
+        join read_parquet('{out}/starts/*.parquet') s using (point, scene_index, start)
+    """)[0]
+    n_rollouts = len(pd.read_parquet(out / "rollouts"))
+    assert joined[:3] == (n_rollouts, n_rollouts, n_rollouts) and joined[3] >= 1
+    tasks = pd.read_parquet(out / "tasks")
+    assert set(tasks.template) <= {"side_grasp", "handle_grasp"}
+    assert all(len(n) == len(q) for n, q in zip(tasks.param_names, tasks.q_init, strict=True))
 
 
 def test_rerun_is_a_no_op(finished):
@@ -485,3 +539,19 @@ def test_modes_of_one_evaluation_are_joined_without_a_copy(shipped_bake):
     assert mixed is not ev
     np.testing.assert_array_equal(mixed.rollouts.outcome[:, 1], one.rollouts.outcome[:, 0])
     np.testing.assert_array_equal(mixed.rollouts.outcome[:, 0], ev.rollouts.outcome[:, 0])
+
+
+def test_random_source_presets(tmp_path):
+    """A random source names the generator's preset (compact by default, whose cache keys
+    and scenes stay those of earlier sweeps); the paper preset spreads the objects
+    wider, so its uniform scenes are less cluttered."""
+    base = {"source": {"kind": "random", "count": 12, "tasks": [5, 10], "sampling": "uniform"}}
+    compact = parse_config(base, "c.toml", tmp_path)
+    paper = parse_config({"source": {**base["source"], "preset": "paper"}}, "p.toml", tmp_path)
+    assert compact.random_ref(3) == (3, "uniform", 5, 10)
+    assert paper.random_ref(3) == (3, "uniform", 5, 10, "paper") and paper.hash() != compact.hash()
+    with pytest.raises(InputError, match="source.preset"):
+        parse_config({"source": {**base["source"], "preset": "wide"}}, "w.toml", tmp_path)
+    c = [precompute(random_scene(*compact.random_ref(i))).C_init for i in range(12)]
+    p = [precompute(random_scene(*paper.random_ref(i))).C_init for i in range(12)]
+    assert np.mean(p) < 0.6 * np.mean(c)

@@ -67,13 +67,25 @@ def test_a_chunks_tables_import_no_pandas():
                              delta_R_mean=np.where(rng.random((S, M)) < .5, np.nan, 1.0),
                              outcome_counts=rng.integers(0, 9, (S, M, 5)))
         labels = {"name": [f"s{i}" for i in range(S)], "n_tasks": [T] * S,
-                  **{k: rng.random(S) for k in ("C_init", "C_final", "d", "h")}}
+                  **{k: rng.random(S) for k in ("C_init", "C_final", "d", "h")},
+                  **{k: [[f"{k}{t}" for t in range(T)]] * S for k in
+                     ("task_ids", "object_ids", "object_kinds", "templates")},
+                  "param_names": [[["radius"], ["length", "half_angle"], ["depth"]]] * S}
+        params = {k: rng.random((S, T, 2)) for k in ("q_min", "q_init", "q_shrunk")}
         modes = ("baseline", "shrinking", "shacc")
-        s = tables.scenes_table(0, {"v_max": 0.2}, ("v_max", "d_max"), modes, range(S),
+        s = tables.scenes_table(0, {"v_max": 0.2, "start_grid": [2, 1]},
+                                ("v_max", "omega_max", "start_grid"), modes, range(S),
                                 labels, me)
+        t = tables.tasks_table(0, modes, range(S), labels, params, ro.outcome)
+        st = tables.starts_table(0, range(S), rng.random((S, N, 7)))
         r = tables.rollouts_table(0, modes, range(S), ro)
-        assert len(tables.parquet_bytes(s)) and len(tables.parquet_bytes(r))
-        assert s.column("set.d_max").null_count == S
+        assert all(len(tables.parquet_bytes(x, n)) for x, n in
+                   ((s, "scenes"), (t, "tasks"), (st, "starts"), (r, "rollouts")))
+        assert s.column("set.omega_max").null_count == S
+        assert s.column("set.start_grid").to_pylist() == [[2, 1]] * S
+        assert t.column("q_optimized").null_count == S * T
+        assert t.column("param_names").to_pylist()[:3] == [["radius"], ["length", "half_angle"],
+                                                          ["depth"]]
         print("pandas" in sys.modules)
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
