@@ -550,7 +550,7 @@ def test_random_source_presets(tmp_path):
     paper = parse_config({"source": {**base["source"], "preset": "paper"}}, "p.toml", tmp_path)
     assert compact.random_ref(3) == (3, "uniform", 5, 10)
     assert paper.random_ref(3) == (3, "uniform", 5, 10, "paper") and paper.hash() != compact.hash()
-    with pytest.raises(InputError, match="source.preset"):
+    with pytest.raises(InputError, match=r"source\.preset"):
         parse_config({"source": {**base["source"], "preset": "wide"}}, "w.toml", tmp_path)
     c = [precompute(random_scene(*compact.random_ref(i))).C_init for i in range(12)]
     p = [precompute(random_scene(*paper.random_ref(i))).C_init for i in range(12)]
