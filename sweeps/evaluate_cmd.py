@@ -77,6 +77,26 @@ def print_table(ev, scenes: list[int], with_scene: bool = True) -> None:
             print(f"{lead}{mode:<10} {me.u_scene[s, m]:>8.3f} {counts} {dr_txt:>14}")
 
 
+def print_tasks(ev, s: int, with_scene: bool = False) -> None:
+    """Scene ``s`` per task: per mode its success rate and outcome counts."""
+    from .pipeline import tasks_json
+
+    r = ev.results[s]
+    k = _outcome_columns([r])
+    detail = tasks_json(ev, s)
+    w = max(len("task"), *(len(t["id"]) for t in detail))
+    print(f"\nper task{f' ({r.scene.name})' if with_scene else ''}:")
+    head = f"{'task':<{w}} {'template':<12} {'mode':<10} {'rate':>7} " + \
+        " ".join(f"{o:>9}" for o in OUTCOMES[:k])
+    print(head)
+    print("-" * len(head))
+    for t in detail:
+        for i, (mode, e) in enumerate(t["modes"].items()):
+            lead = f"{t['id']:<{w}} {t['template']:<12} " if i == 0 else " " * (w + 14)
+            counts = " ".join(f"{e['outcome_counts'][o]:>9}" for o in OUTCOMES[:k])
+            print(f"{lead}{mode:<10} {e['success_rate']:>7.3f} {counts}")
+
+
 def cmd_evaluate(args) -> int:
     if len(set(args.modes)) != len(args.modes):
         raise InputError("<arguments>", "--modes", f"each mode once, got {args.modes}")
@@ -94,6 +114,11 @@ def cmd_evaluate(args) -> int:
             print(f"{len(results)} scenes, {ev.baked.n_starts} starts each, evaluated as "
                   "one batch")
             print_table(ev, list(range(len(results))))
+        if len(results) <= 10:
+            for s in range(len(results)):
+                print_tasks(ev, s, with_scene=len(results) > 1)
+        else:
+            print("per-task rates: in --json (tasks_detail), for batches of more than 10")
         print(f"time: precompute {1e3 * (t1 - t0):.1f} ms, evaluation (with compilation) "
               f"{ev.seconds['evaluate']:.2f} s")
     if args.json:

@@ -114,6 +114,35 @@ def human_output(json_target: str | None):
         contextlib.nullcontext()
 
 
+def provenance(device: bool = False) -> dict[str, Any]:
+    """What produced a result: the command line, the versions of shacc and of what it
+    runs on, the machine and the time; with ``device``, JAX's backend and device too
+    (a sweep's client never starts JAX: its evaluation workers record theirs in every
+    Parquet part)."""
+    import datetime
+    import importlib.metadata as md
+    import platform
+
+    versions = {}
+    for name in ("shacc", "jax", "jaxlib", "numpy", "scipy", "pyarrow", "mujoco", "evosax",
+                 "dask", "distributed"):
+        try:
+            versions[name] = md.version(name)
+        except md.PackageNotFoundError:
+            versions[name] = None
+    out = {"command": " ".join(["shacc", *sys.argv[1:]]), "versions": versions,
+           "python": platform.python_version(), "platform": platform.platform(),
+           "host": platform.node(),
+           "time": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
+    if device:
+        import jax
+
+        dev = jax.devices()[0]
+        out.update(backend=jax.default_backend(),
+                   device=getattr(dev, "device_kind", str(dev)))
+    return out
+
+
 def precompute_json(r: PrecomputeResult) -> dict[str, Any]:
     """The precompute keys of SPEC section 12a."""
     ids = r.task_ids

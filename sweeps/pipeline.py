@@ -22,7 +22,7 @@ from geometry_precompute.bake import GEOMETRY_FIELDS
 from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
 
 from . import memory
-from .output import precompute_json
+from .output import precompute_json, provenance
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,7 @@ class Evaluated:
     modes: tuple[str, ...]
     seconds: dict
     search: Search | None = None  # the optimized mode's search (NumPy), when asked for
+    provenance: dict | None = None  # software, backend, device, command line
 
 
 def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) -> Evaluation:
@@ -119,7 +120,7 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
     ev, found = evaluate_baked(baked, modes, found=found)
     t2 = time.perf_counter()
     return Evaluated(list(results), baked, ev, tuple(modes),
-                     {"bake": t1 - t0, "evaluate": t2 - t1}, found)
+                     {"bake": t1 - t0, "evaluate": t2 - t1}, found, provenance(device=True))
 
 
 def _none_if_nan(x: float):
@@ -147,8 +148,47 @@ def scene_json(ev: Evaluated, s: int) -> dict:
             "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
         }
     out["modes"] = modes
+    for m, mode in enumerate(ev.modes):
+        modes[mode]["n_rollouts"] = int(me.n_rollouts[s, m])
+        modes[mode]["outcome_counts"] = {o: int(c) for o, c in
+                                         zip(OUTCOMES, me.outcome_counts[s, m], strict=True)}
+    out["tasks_detail"] = tasks_json(ev, s)
     if ev.search is not None:
         out["optimize"] = optimize_json(ev, s)
+    out["settings"] = r.settings.to_dict()
+    out["provenance"] = ev.provenance
+    return out
+
+
+def task_counts(outcome: np.ndarray) -> np.ndarray:
+    """(T, 5) counts of each outcome per task of one scene and mode's (N, T) outcomes."""
+    return np.stack([np.sum(outcome == c, axis=0) for c in range(len(OUTCOMES))], axis=1)
+
+
+def tasks_json(ev: Evaluated, s: int) -> list[dict]:
+    """Per task of scene ``s``: who it is, its parameters (bounds, Shrinking's, the
+    optimized mode's where it ran) and per mode its success rate (an exact fraction)
+    and outcome counts."""
+    r = ev.results[s]
+    T = len(r.spaces)
+    per_mode = {mode: task_counts(ev.evaluation.rollouts.outcome[s, m, :, :T])
+                for m, mode in enumerate(ev.modes)}
+    out = []
+    for t, (task, sp) in enumerate(zip(r.scene.tasks, r.spaces, strict=True)):
+        n = len(sp.param_names)
+        params = {"names": list(sp.param_names), "min": sp.q_min.tolist(),
+                  "init": sp.q_init.tolist(), "shrinking": r.q_opt[t].tolist()}
+        if ev.search is not None:
+            params["optimized"] = [float(v) for v in ev.search.q[s, t, :n]]
+        modes = {}
+        for mode, counts in per_mode.items():
+            c = counts[t]
+            modes[mode] = {"success_rate": float(c[0]) / max(int(c.sum()), 1),
+                           "outcome_counts": {o: int(k) for o, k in
+                                              zip(OUTCOMES, c, strict=True)}}
+        out.append({"id": task.id, "object": task.object,
+                    "object_kind": r.scene.object(task.object).kind,
+                    "template": task.template, "params": params, "modes": modes})
     return out
 
 

@@ -39,7 +39,7 @@ from geometry_precompute.fileio import read_bytes_limited
 
 from . import tables
 from .config import SweepConfig
-from .output import check_output_dir, write_atomic, write_json
+from .output import check_output_dir, provenance, write_atomic, write_json
 from .plan import Chunk, bucket, plan, point_groups, precompute_batches, shapes
 
 # For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
@@ -199,26 +199,6 @@ def _check_marker(out: Path, cfg: SweepConfig, h: str, write: bool = True) -> No
                              f"{previous.get('hash')}, this config {h}); use a new --out")
     elif write:
         write_json(marker, {"hash": h, "config": cfg.resolved(), "provenance": provenance()})
-
-
-def provenance() -> dict:
-    """Who ran a sweep or an evaluation, how: the command line, this installation's
-    versions, the machine and the time (the evaluation workers add the device's in
-    each Parquet part)."""
-    import datetime
-    import importlib.metadata as md
-    import platform
-
-    versions = {}
-    for name in ("shacc", "jax", "jaxlib", "numpy", "scipy", "pyarrow", "dask", "distributed"):
-        try:
-            versions[name] = md.version(name)
-        except md.PackageNotFoundError:
-            versions[name] = None
-    return {"command": " ".join(["shacc", *sys.argv[1:]]), "versions": versions,
-            "python": platform.python_version(), "platform": platform.platform(),
-            "host": platform.node(),
-            "time": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
 
 
 def _setting_names(cfg: SweepConfig) -> tuple[str, ...]:

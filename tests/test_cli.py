@@ -34,11 +34,13 @@ def test_evaluate_json_has_exactly_spec_keys(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "baseline" in text and "shacc" in text and "success" in text
     d = json.loads(out.read_text())
-    assert list(d) == ["scene", "tasks", "clutteredness", "clusters", "shrinking", "metrics",
-                       "starts", "modes"]
+    # The SPEC 12a keys first, in order; then the keys added since (the object only grows).
+    assert list(d)[:8] == ["scene", "tasks", "clutteredness", "clusters", "shrinking",
+                           "metrics", "starts", "modes"]
+    assert list(d)[8:] == ["tasks_detail", "settings", "provenance"]
     assert list(d["modes"]) == ["baseline", "shrinking", "shacc"]
     m = d["modes"]["shacc"]
-    assert list(m) == ["success_rate", "delta_R_mean", "outcome", "activated", "delta_R"]
+    assert list(m)[:5] == ["success_rate", "delta_R_mean", "outcome", "activated", "delta_R"]
     assert len(d["starts"]) == 6 and len(d["starts"][0]) == 7
     assert len(m["outcome"]) == 6 and len(m["outcome"][0]) == 3
     for row_o, row_a, row_d in zip(m["outcome"], m["activated"], m["delta_R"], strict=True):
@@ -49,7 +51,22 @@ def test_evaluate_json_has_exactly_spec_keys(tmp_path, capsys):
             if o == "success":
                 assert a in d["tasks"]
     n_success = sum(o == "success" for row in m["outcome"] for o in row)
-    assert m["success_rate"] == pytest.approx(n_success / 18)
+    assert m["success_rate"] == n_success / 18  # an exact fraction, in double precision
+    assert m["outcome_counts"]["success"] == n_success and m["n_rollouts"] == 18
+    # Per task: who it is, its parameters, and per mode its own rate and counts.
+    assert [t["id"] for t in d["tasks_detail"]] == d["tasks"]
+    for t, task_id in enumerate(d["tasks"]):
+        detail = d["tasks_detail"][t]
+        assert detail["template"] == "side_grasp" and detail["params"]["names"] == ["radius"]
+        assert detail["params"]["shrinking"] == [d["shrinking"]["params"][task_id]["radius"]]
+        ok = sum(row[t] == "success" for row in m["outcome"])
+        assert detail["modes"]["shacc"]["success_rate"] == ok / 6
+        assert sum(detail["modes"]["shacc"]["outcome_counts"].values()) == 6
+    assert "per task:" in text and d["tasks"][0] in text.split("per task:")[1]
+    # Every setting used, and what produced it.
+    assert d["settings"]["start_grid"] == [3, 2] and d["settings"]["v_max"] == 0.15
+    prov = d["provenance"]
+    assert prov["backend"] == "cpu" and prov["versions"]["jax"] and prov["command"]
 
 
 def test_bad_input_one_line_no_output(tmp_path):
