@@ -163,6 +163,20 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func="runner:cmd_sweep")
 
+    c = command("compare", "paired differences of two evaluate outputs or sweep folders of "
+                "the same scenes (for CI: --fail-if)")
+    c.add_argument("a", type=_path, help="evaluate --json file or sweep folder (before)")
+    c.add_argument("b", type=_path, help="the same for after")
+    c.add_argument("--fail-if", action="append", default=[], metavar="[MODE.]METRIC:MARGIN",
+                   help="exit with status 3 if B - A is below a negative MARGIN (above a "
+                   "positive one) across its whole 95 %% CI, e.g. success:-0.02 or "
+                   "shacc.delta_R_mean:+0.1 (may be repeated)")
+    c.add_argument("--json", metavar="OUT.json", type=_path, help="write the comparison")
+    c.add_argument("--bootstrap", type=_int_in(100, 10**6), default=10_000,
+                   help="bootstrap resamples of the intervals")
+    c.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=0, help="their seed")
+    c.set_defaults(func="compare:cmd_compare")
+
     c = command("export-mjcf", "write a scene as MJCF (loads in MuJoCo)")
     c.add_argument("scene", type=_path, help="scene TOML file")
     c.add_argument("out", type=_path, help="MJCF file to write")

@@ -555,3 +555,15 @@ def test_random_source_presets(tmp_path):
     c = [precompute(random_scene(*compact.random_ref(i))).C_init for i in range(12)]
     p = [precompute(random_scene(*paper.random_ref(i))).C_init for i in range(12)]
     assert np.mean(p) < 0.6 * np.mean(c)
+
+
+def test_compare_two_sweep_folders(finished):
+    """A sweep compared with itself: a row per point, mode and metric, every difference
+    zero (the same scenes and points, read from the typed tables)."""
+    from sweeps.compare import compare
+
+    _, out, _, _ = finished
+    result = compare(out, out, n_boot=200)
+    assert {r["point"] for r in result["rows"]} == {0, 1}
+    assert len(result["rows"]) == 2 * 3 * 2
+    assert all(r["diff"] in (0.0, None) and r["n_scenes"] <= 3 for r in result["rows"])
