@@ -7,7 +7,9 @@ import fnmatch
 import json
 import math
 import os
+import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -114,6 +116,16 @@ def human_output(json_target: str | None):
         contextlib.nullcontext()
 
 
+_COMMAND: list[str] | None = None
+
+
+def record_command(argv: Sequence[str]) -> None:
+    """The arguments ``main`` was called with, for ``provenance`` (``sys.argv`` is the
+    caller's when ``main`` is called from Python)."""
+    global _COMMAND
+    _COMMAND = list(argv)
+
+
 def provenance(device: bool = False) -> dict[str, Any]:
     """What produced a result: the command line, the versions of shacc and of what it
     runs on, the machine and the time; with ``device``, JAX's backend and device too
@@ -130,7 +142,8 @@ def provenance(device: bool = False) -> dict[str, Any]:
             versions[name] = md.version(name)
         except md.PackageNotFoundError:
             versions[name] = None
-    out = {"command": " ".join(["shacc", *sys.argv[1:]]), "versions": versions,
+    argv = sys.argv[1:] if _COMMAND is None else _COMMAND
+    out = {"command": shlex.join(["shacc", *argv]), "versions": versions,
            "python": platform.python_version(), "platform": platform.platform(),
            "host": platform.node(),
            "time": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}

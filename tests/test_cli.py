@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -180,6 +181,10 @@ def test_one_scene_alone_equals_the_same_scene_in_a_batch(tmp_path):
     assert main(["evaluate", b, a, "--set", "start_grid=[3,2]", "--json", str(two)]) == 0
     alone = json.loads(one.read_text())
     batched = [json.loads(x) for x in two.read_text().splitlines()][1]
+    # Everything but the record of the command that produced it.
+    assert alone.pop("provenance")["command"] == shlex.join(
+        ["shacc", "evaluate", a, "--set", "start_grid=[3,2]", "--json", str(one)])
+    assert batched.pop("provenance")["command"].startswith(f"shacc evaluate {shlex.quote(b)}")
     assert alone == batched
 
 

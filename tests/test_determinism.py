@@ -91,16 +91,16 @@ v_max = [0.15, 0.5]
 
 
 def _tables(out: Path) -> dict:
-    """Every column of both tables, as the bytes of its values (NaN is NaN)."""
+    """Every column of every table, as the bytes of its values (NaN is NaN)."""
     found = {}
-    for name in ("scenes", "rollouts"):
+    for name in ("scenes", "rollouts", "tasks", "starts"):
         table = pq.read_table(out / name)
         for col in table.column_names:
             values = table[col].combine_chunks()
             if hasattr(values, "dictionary"):
                 values = values.dictionary_decode()
             array = values.to_numpy(zero_copy_only=False)
-            found[(name, col)] = array.tolist() if array.dtype == object else array.tobytes()
+            found[(name, col)] = values.to_pylist() if array.dtype == object else array.tobytes()
     return found
 
 
