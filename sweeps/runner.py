@@ -62,7 +62,8 @@ LOOKAHEAD = 1024
 
 # What a sweep writes into its output folder; a folder holding anything else is refused.
 TABLES = tables.TABLES
-SWEEP_FILES = ("config.json", *TABLES, ".*.tmp", ".lock")
+# ``report.html`` is what ``shacc report`` writes into the folder by default.
+SWEEP_FILES = ("config.json", *TABLES, ".*.tmp", ".lock", "report.html")
 
 
 def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
