@@ -43,8 +43,10 @@ def _geom(shape: Shape, name: str, rgba: str, collide: bool, group: int,
             f'group="{group}"{flags}/>')
 
 
-def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "both") -> str:
-    """MJCF text of a precomputed scene; ``spaces`` is "both", "init", "opt" or "none"."""
+def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "both",
+                  opt_rgba: str | None = None) -> str:
+    """MJCF text of a precomputed scene; ``spaces`` is "both", "init", "opt" or "none";
+    ``opt_rgba`` the colour of the second spaces (default blue, Shrinking's)."""
     scene = result.scene
     assets, geoms = [], []
     pos = np.array([o.position for o in scene.objects])
@@ -57,7 +59,7 @@ def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "b
     which = {"both": ("init", "opt"), "init": ("init",), "opt": ("opt",), "none": ()}[spaces]
     for w in which:
         shapes = result.shapes_init if w == "init" else result.shapes_opt
-        rgba, group = (INIT_RGBA, 1) if w == "init" else (OPT_RGBA, 2)
+        rgba, group = (INIT_RGBA, 1) if w == "init" else (opt_rgba or OPT_RGBA, 2)
         for task, shape in zip(result.task_ids, shapes, strict=True):
             name = f"space:{w}:{task}"
             mesh = None

@@ -91,7 +91,7 @@ def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None
               color=MODE_COLORS.get(mode))
     a.set_xticks(np.arange(len(names)), names)
     a.set_ylabel(ylabel or metric)
-    a.legend(fontsize=8)
+    a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     a.grid(axis="y", alpha=0.3)
     if ax is None:
         fig.tight_layout()
@@ -154,40 +154,188 @@ def _outline_xy(shape) -> np.ndarray:
     return (local @ rot.T + center)[:, :2]
 
 
-def scene_top_view(result, ax=None, path=None, show_clusters: bool = True):
-    """Top-down view: objects, initial (red) and optimised (blue) position spaces,
-    clusters by label (the paper's Fig. 5a)."""
+SPACE_STYLE = {  # how a top view and its legend draw each kind of space
+    "init": {"color": "#d62728", "lw": 1.0, "ls": "-", "label": "initial space"},
+    "shrinking": {"color": "#1f77b4", "lw": 1.3, "ls": "-", "label": "after Shrinking"},
+    "optimized": {"color": "#9467bd", "lw": 1.5, "ls": "--", "label": "optimized"},
+}
+
+
+def _place_labels(ax, items, avoid=(), fontsize: float = 7.0) -> list:
+    """Write each ``(text, (x, y), color)`` near its point without covering another
+    label, a box of ``avoid`` (display coordinates) or leaving the axes: the first of
+    rings of candidate positions around the point that is free (else the least
+    covered), joined to the point by a thin line. Returns the Annotations."""
+    from matplotlib.text import Text
+    from matplotlib.transforms import Bbox
+
+    def text_box(ann):  # the text alone, without its leader line, where it now is
+        ann.update_positions(renderer)
+        return Text.get_window_extent(ann, renderer)
+
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    ax.apply_aspect()
+    frame = ax.get_window_extent(renderer)
+    placed = [Bbox(b) for b in avoid]
+    out = []
+    angles = np.deg2rad(np.arange(0, 360, 22.5))
+    for text, xy, color in items:
+        ann = ax.annotate(text, xy, xytext=xy, fontsize=fontsize, color=color,
+                          ha="center", va="center", zorder=5,
+                          bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
+                                "alpha": 0.8},
+                          arrowprops={"arrowstyle": "-", "lw": 0.6, "color": color})
+        anchor = ax.transData.transform(xy)
+        best, best_cost = None, np.inf
+        for radius in (22, 34, 48, 64, 84, 110):
+            for th in angles:
+                at = anchor + radius * np.array([np.cos(th), np.sin(th)])
+                ann.xyann = tuple(ax.transData.inverted().transform(at))
+                box = text_box(ann).expanded(1.05, 1.15)
+                cost = sum(_overlap(box, q) for q in placed)
+                if not frame.contains(box.x0, box.y0) or not frame.contains(box.x1, box.y1):
+                    cost += 1e6
+                if cost < best_cost:
+                    best, best_cost = at, cost
+                if cost == 0:
+                    break
+            if best_cost == 0:
+                break
+        ann.xyann = tuple(ax.transData.inverted().transform(best))
+        placed.append(text_box(ann))
+        out.append(ann)
+    return out
+
+
+def _overlap(a, b) -> float:
+    w = min(a.x1, b.x1) - max(a.x0, b.x0)
+    h = min(a.y1, b.y1) - max(a.y0, b.y0)
+    return w * h if w > 0 and h > 0 else 0.0
+
+
+def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
+                   labels: bool = True, legend: bool = True, start_plane: bool = True,
+                   optimized=None, rollout=None, success: dict | None = None):
+    """Top-down view (the paper's Fig. 5a): objects (their ids), each task's initial
+    space (red), its space after Shrinking (blue) and, given ``optimized`` (Shapes, task
+    order), the optimized mode's (purple, dashed); every task's id beside its space,
+    with its meta-skill cluster (``K0``, ...) when it has one; the start plane; a legend.
+    ``rollout``: ``(start xyz, end xyz, outcome name, label)`` drawn as a line from the
+    start to where the rollout ended. ``success``: mode -> success rate, in the title.
+    Labels are placed so that none covers another (:func:`_place_labels`)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     from geometry_precompute.bodies import object_body
+    from geometry_precompute.starts import start_plane as plane_of
 
     own = ax is None
     if own:
-        fig, ax = plt.subplots(figsize=(4.5, 4.5))
+        fig, ax = plt.subplots(figsize=(6.4, 4.8))
     else:
         fig = ax.figure
     cluster_of = {i: k for k, c in enumerate(result.meta_clusters()) for i in c}
-    for i, (si, so) in enumerate(zip(result.shapes_init, result.shapes_opt, strict=True)):
-        ring = _outline_xy(si)
-        ax.fill(ring[:, 0], ring[:, 1], color="red", alpha=0.12)
-        ax.plot(ring[:, 0], ring[:, 1], color="red", lw=1)
-        ring = _outline_xy(so)
-        ax.plot(ring[:, 0], ring[:, 1], color="blue", lw=1.3)
-        if show_clusters and i in cluster_of:
-            ax.annotate(f"K{cluster_of[i]}", so.center[:2], fontsize=7, color="blue")
+    kinds = [("init", result.shapes_init), ("shrinking", result.shapes_opt)]
+    if optimized is not None:
+        kinds.append(("optimized", optimized))
+    extent = []
+    for kind, shapes in kinds:
+        st = SPACE_STYLE[kind]
+        for shape in shapes:
+            ring = _outline_xy(shape)
+            extent.append(ring)
+            if kind == "init":
+                ax.fill(ring[:, 0], ring[:, 1], color=st["color"], alpha=0.10, lw=0)
+            ax.plot(ring[:, 0], ring[:, 1], color=st["color"], lw=st["lw"], ls=st["ls"])
     for o in result.scene.objects:
         ring = _outline_xy(object_body(o))
-        ax.fill(ring[:, 0], ring[:, 1], color="k", alpha=0.6)
-        ax.annotate(o.id, (o.position[0], o.position[1]), fontsize=7, color="w",
-                    ha="center", va="center")
-    ax.set_aspect("equal")
-    ax.set_title(f"{result.scene.name}\nC_init {result.C_init:.2f} -> C_final "
-                 f"{result.C_final:.2f}", fontsize=9)
+        extent.append(ring)
+        ax.fill(ring[:, 0], ring[:, 1], color="k", alpha=0.6, zorder=3)
+    handles = [Patch(fc=SPACE_STYLE["init"]["color"], alpha=0.35,
+                     ec=SPACE_STYLE["init"]["color"], label=SPACE_STYLE["init"]["label"])]
+    handles += [Line2D([], [], color=SPACE_STYLE[k]["color"], lw=SPACE_STYLE[k]["lw"],
+                       ls=SPACE_STYLE[k]["ls"], label=SPACE_STYLE[k]["label"])
+                for k, _ in kinds[1:]]
+    handles.append(Patch(fc="k", alpha=0.6, label="object"))
+    if start_plane:
+        x0, (y0, y1), (z0, z1) = plane_of(result.scene, result.settings)
+        ax.plot([x0, x0], [y0, y1], color="0.35", lw=3, solid_capstyle="butt")
+        extent.append(np.array([[x0, y0], [x0, y1]]))
+        handles.append(Line2D([], [], color="0.35", lw=3,
+                              label=f"start plane (x {x0:.2f} m, z {z0:.2f}-{z1:.2f} m)"))
+    if rollout is not None:
+        p0, p1, outcome, text = rollout
+        color = OUTCOME_COLORS[_outcome_index(outcome)]
+        ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color=color, lw=2, zorder=4)
+        ax.plot([p0[0]], [p0[1]], "o", color=color, ms=4, zorder=4)
+        ax.plot([p1[0]], [p1[1]], "X", color=color, ms=7, zorder=4)
+        extent.append(np.array([p0[:2], p1[:2]]))
+        handles.append(Line2D([], [], color=color, lw=2, marker="X", label=text))
+    if show_clusters and cluster_of:
+        handles.append(Line2D([], [], ls="none", label="K0, K1, ...: meta-skill clusters"))
+    pts = np.vstack(extent)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.08 * max(hi - lo) + 0.02
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    title = f"{result.scene.name}\nC_init {result.C_init:.2f} -> C_final {result.C_final:.2f}"
+    if success:
+        title += "\nsuccess: " + ", ".join(f"{m} {v:.2f}" for m, v in success.items())
+    ax.set_title(title, fontsize=9)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(alpha=0.3)
+    if legend:
+        ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                  borderaxespad=0.0, frameon=False)
     if own:
         fig.tight_layout()
-        _save(fig, path)
+    # Object ids on the objects, then task ids beside their spaces, none covering another.
+    renderer = fig.canvas.get_renderer()
+    ax.apply_aspect()
+    avoid = []
+    for o in result.scene.objects:
+        t = ax.text(o.position[0], o.position[1], o.id, fontsize=7, color="w",
+                    ha="center", va="center", zorder=6)
+        avoid.append(t.get_window_extent(renderer))
+    if labels:
+        items = []
+        for i, (task, shape) in enumerate(zip(result.scene.tasks, result.shapes_init,
+                                              strict=True)):
+            k = cluster_of.get(i) if show_clusters else None
+            items.append((task.id + (f" (K{k})" if k is not None else ""),
+                          _label_anchor(result, task, shape), SPACE_STYLE["init"]["color"]
+                          if k is None else "#1f3f77"))
+        _place_labels(ax, items, avoid)
+    elif show_clusters:
+        for i, k in cluster_of.items():
+            ax.annotate(f"K{k}", result.shapes_opt[i].center[:2], fontsize=7, color="blue",
+                        xytext=(6, 6), textcoords="offset points")
+    _save(fig, path)
     return fig
+
+
+def _label_anchor(result, task, shape) -> np.ndarray:
+    """Where a task's label points: its space's footprint point farthest from the
+    other objects' centroid side, i.e. the rim of its space on the side away from the
+    scene's centre (two tasks of one object get different anchors when their spaces
+    differ), or the space's centre."""
+    ring = _outline_xy(shape)[:-1]
+    centre = np.mean([o.position[:2] for o in result.scene.objects], axis=0)
+    own = np.asarray(shape.center[:2])
+    away = own - centre
+    if np.linalg.norm(away) < 1e-6:
+        return own
+    away /= np.linalg.norm(away)
+    return ring[np.argmax((ring - own) @ away)]
+
+
+def _outcome_index(name: str) -> int:
+    from geometry_precompute.schema import OUTCOMES
+
+    return OUTCOMES.index(name)
 
 
 def space_shadows_yz(shapes, sections: int = 32) -> list[np.ndarray]:
@@ -259,7 +407,7 @@ def scene_gallery(results, columns: int = 4, path=None, ax=None):
     else:
         fig, axes = _figure(ax, len(results))
     for a, r in zip(axes, results, strict=False):
-        scene_top_view(r, ax=a)
+        scene_top_view(r, ax=a, labels=False, legend=False, start_plane=False)
     for a in axes[len(results):]:
         a.axis("off")
     if ax is None:
@@ -329,7 +477,10 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     if other and others == "marginalise":
         a.set_title(f"mean over {', '.join(other)} (scenes resampled as clusters)",
                     fontsize=8)
-    a.legend(fontsize=6 if len(combos) > 2 else 8)
+    if len(combos) > 1:  # many lines: the legend beside the axes, never over the data
+        a.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    else:
+        a.legend(fontsize=8)
     a.grid(alpha=0.3)
     if ax is None:
         fig.tight_layout()

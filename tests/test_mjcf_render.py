@@ -74,9 +74,10 @@ def test_render_draws_the_gripper_at_the_end_pose(shipped_results):
     from sweeps.render import render_array, rollout_path
 
     r = shipped_results[9]  # three mugs in a cluster: the meta skill turns the gripper
-    ro = evaluate_results([r], ("shacc",)).evaluation.rollouts
+    ev = evaluate_results([r], ("shacc",))
+    ro = ev.evaluation.rollouts
     n, t = np.argwhere(ro.meta_steps[0, 0] > 5)[0]
-    path = rollout_path(r, "shacc", int(n), int(t))
+    path = rollout_path(ev, "shacc", int(n), r.task_ids[t])
     np.testing.assert_allclose(path.points[1], ro.point[0, 0, n, t], atol=1e-6)
     start, end = (Rotation.from_quat(np.roll(q, -1)) for q in path.quats)
     assert (start.inv() * end).magnitude() > 0.05  # it turned
@@ -88,3 +89,91 @@ def test_render_draws_the_gripper_at_the_end_pose(shipped_results):
     bare = render_array(r, 320, 240, "both", path._replace(capsules=[]))
     changed = np.abs(drawn.astype(int) - bare.astype(int)).sum(axis=-1) > 30
     assert changed.sum() > 100  # the capsules cover a visible part of the picture
+
+
+def test_render_path_takes_task_ids_and_prints_the_outcome(tmp_path, capsys,
+                                                          shipped_results):
+    """``--path START TASK`` names the task by id (or index) and prints the rollout's
+    outcome, which is the evaluation's; a wrong id lists the scene's tasks."""
+    from geometry_precompute import shipped_scene_paths
+    from geometry_precompute.schema import OUTCOMES
+    from sweeps.pipeline import evaluate_results
+
+    scene = shipped_scene_paths()[11]  # cabinet, mug and cup
+    r = shipped_results[11]
+    ev = evaluate_results([r], ("baseline",))
+    ro = ev.evaluation.rollouts
+    out = tmp_path / "scene.png"
+    for start in (0, 7):
+        for t, task in enumerate(r.task_ids):
+            want = OUTCOMES[int(ro.outcome[0, 0, start, t])]
+            assert main(["render", str(scene), "--out", str(out), "--mode", "baseline",
+                         "--width", "320", "--height", "200", "--path", str(start),
+                         task]) == 0
+            line = capsys.readouterr().out.splitlines()[0]
+            assert line.startswith(f"start {start} -> task {task} (baseline): {want} ")
+    assert main(["render", str(scene), "--out", str(tmp_path / "x.png"), "--path", "0",
+                 "grasp-nothing"]) == 2
+    err = capsys.readouterr().err
+    assert "grasp-nothing" in err and all(t in err for t in r.task_ids)
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_top_view_labels_every_task_and_none_covers_another(shipped_results):
+    """The most crowded shipped scenes: every task id is written once, with its cluster;
+    no two labels (task or object) overlap, and all lie inside the axes; the legend
+    names every kind of space drawn, and the start plane."""
+    import matplotlib.pyplot as plt
+    from matplotlib.text import Annotation, Text
+
+    from sweeps.plots import scene_top_view
+
+    for r in (shipped_results[9], shipped_results[2], shipped_results[11]):
+        fig, ax = plt.subplots(figsize=(6.4, 4.8))
+        fig.subplots_adjust(right=0.6)
+        scene_top_view(r, ax=ax, optimized=r.shapes_init, success={"baseline": 0.5})
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        labels = [t for t in ax.texts if isinstance(t, Annotation)]
+        objects = [t for t in ax.texts if not isinstance(t, Annotation)]
+        clusters = {i: k for k, c in enumerate(r.meta_clusters()) for i in c}
+        want = [tid + (f" (K{clusters[i]})" if i in clusters else "")
+                for i, tid in enumerate(r.task_ids)]
+        assert [t.get_text() for t in labels] == want
+        assert sorted(t.get_text() for t in objects) == sorted(o.id for o in r.scene.objects)
+        boxes = [Text.get_window_extent(t, renderer) for t in labels + objects]  # no leader
+        frame = ax.get_window_extent(renderer)
+        for i, a in enumerate(boxes[:len(labels)]):
+            assert frame.x0 <= a.x0 and a.x1 <= frame.x1 and frame.y0 <= a.y0 <= a.y1 <= frame.y1
+            for b in boxes[i + 1:]:
+                assert not a.overlaps(b), (r.scene.name, a, b)
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert legend[:4] == ["initial space", "after Shrinking", "optimized", "object"]
+        assert any(t.startswith("start plane (x ") for t in legend)
+        assert "success: baseline 0.50" in ax.get_title()
+        plt.close(fig)
+
+
+def test_render_optimized_mode_draws_its_own_spaces(tmp_path):
+    """``--mode optimized`` searches, draws the optimized spaces (not Shrinking's),
+    within the template's bounds, and its success is in the title. A short search
+    (8 generations) keeps it quick; both runs share one compiled program."""
+    from geometry_precompute import load_scene, precompute, shipped_scene_paths
+    from sweeps.pipeline import evaluate_results
+    from sweeps.render import optimized_shapes
+
+    scene = shipped_scene_paths()[11]  # cabinet, mug and cup: the search beats Shrinking
+    short = {"optimize_generations": 8}
+    r = precompute(load_scene(scene), short)
+    ev = evaluate_results([r], ("shrinking", "optimized"))
+    opt = optimized_shapes(ev)
+    assert len(opt) == len(r.task_ids)
+    assert any(not np.allclose(a.dims, b.dims) for a, b in zip(opt, r.shapes_opt,
+                                                                strict=True))
+    for t, sp in enumerate(r.spaces):
+        q = ev.search.q[0, t, :len(sp.param_names)]
+        assert np.all(q >= sp.q_min - 1e-9) and np.all(q <= sp.q_init + 1e-9)
+    out = tmp_path / "opt.png"
+    assert main(["render", str(scene), "--out", str(out), "--mode", "optimized",
+                 "--set", "optimize_generations=8", "--width", "400", "--height", "240"]) == 0
+    assert mpimg.imread(out).shape[:2] == (240, 400)
