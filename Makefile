@@ -25,7 +25,10 @@ bench: $(BIN)/shacc
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
 
-# Executed .ipynb copies of the notebooks (git-ignored) and the README's pictures.
+# Executed copies of the notebooks and their figures, in build/notebooks (git-ignored);
+# `make notebooks FIGURES=docs/notebooks` refreshes the README's pictures instead.
+NOTEBOOKS_OUT ?= build/notebooks
+FIGURES ?= $(NOTEBOOKS_OUT)
 notebooks: $(BIN)/shacc
-	mkdir -p docs/notebooks
-	SHACC_FIGURES=$(CURDIR)/docs/notebooks $(BIN)/python -m sweeps.notebook_runner --write-ipynb
+	mkdir -p $(NOTEBOOKS_OUT) $(FIGURES)
+	$(BIN)/python -m sweeps.notebook_runner --out $(NOTEBOOKS_OUT) -p FIGURES=$(abspath $(FIGURES))

@@ -177,6 +177,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=_int_in(0, 2**31 - 1), default=0, help="their seed")
     c.set_defaults(func="compare:cmd_compare")
 
+    c = command("report", "one self-contained HTML page of a sweep folder or an evaluate "
+                "--json file (tables with scene-level CIs, figures, provenance)")
+    c.add_argument("source", type=_path, help="sweep folder or evaluate --json file")
+    c.add_argument("--out", type=_path, help="HTML file (default: report.html in the sweep "
+                   "folder, or the JSON file's name with .html)")
+    c.set_defaults(func="report:cmd_report")
+
     c = command("export-mjcf", "write a scene as MJCF (loads in MuJoCo)")
     c.add_argument("scene", type=_path, help="scene TOML file")
     c.add_argument("out", type=_path, help="MJCF file to write")
@@ -186,14 +193,15 @@ def build_parser() -> argparse.ArgumentParser:
     c = command("render", "3-D MuJoCo picture beside the top-down view")
     c.add_argument("scene", type=_path, help="scene TOML file")
     c.add_argument("--out", required=True, type=_path, help="PNG file")
-    c.add_argument("--mode", default="shacc", choices=list(PAPER_MODES),
-                   help="whose spaces to draw and roll out")
+    c.add_argument("--mode", default="shacc", choices=[*PAPER_MODES, "optimized"],
+                   help="whose spaces to draw and roll out (optimized runs its search first)")
     c.add_argument("--width", type=_int_in(64, 8192), default=1280,
                    help="picture width in pixels")
     c.add_argument("--height", type=_int_in(64, 8192), default=560,
                    help="picture height in pixels")
-    c.add_argument("--path", type=int, nargs=2, metavar=("START", "TASK"),
-                   help="draw one rollout of --mode")
+    c.add_argument("--path", nargs=2, metavar=("START", "TASK"),
+                   help="draw one rollout of --mode and print its outcome: START is a start "
+                   "index, TASK a task id (or its index)")
     _add_set(c)
     c.set_defaults(func="render:cmd_render")
     return p
@@ -241,6 +249,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .faults import GuardedStdout
 
     argv = sys.argv[1:] if argv is None else list(argv)
+    from .output import record_command
+
+    record_command(argv)
     stdout = sys.stdout
     sys.stdout = GuardedStdout(stdout)
     try:

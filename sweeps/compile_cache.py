@@ -1,7 +1,8 @@
 """Compiled programs kept on disk, on for every command that evaluates.
 
 Compiling the evaluation takes seconds and the rollouts of one scene milliseconds,
-so every ``shacc`` command that evaluates keeps what it built: a later run whose
+so every ``shacc`` command that evaluates, and every evaluation through the Python API
+(``sweeps.pipeline``, as notebooks use it), keeps what it built: a later run whose
 padded shapes (tasks, starts, objects), modes and layout were seen before loads the
 program instead of building it. Two kinds of entry, in two subfolders:
 
@@ -89,9 +90,22 @@ def lean_locations() -> None:
     jax.config.update("jax_traceback_in_locations_limit", 0)
 
 
+_ENABLED: list[Path | None] = []
+
+
 def enable() -> Path | None:
     """Turn both caches on for this process (before the first compilation), and
-    :func:`lean_locations`."""
+    :func:`lean_locations`. Called by every command that evaluates and by the Python
+    API's first evaluation (``sweeps.pipeline.evaluate_baked``), so notebooks and
+    scripts keep their programs too; a second call does nothing."""
+    if _ENABLED:
+        return _ENABLED[0]
+    path = _enable()
+    _ENABLED.append(path)
+    return path
+
+
+def _enable() -> Path | None:
     lean_locations()
     path = cache_dir()
     if path is None:

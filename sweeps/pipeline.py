@@ -21,7 +21,7 @@ from geometry_precompute import (
 from geometry_precompute.bake import GEOMETRY_FIELDS
 from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
 
-from . import memory
+from . import compile_cache, memory
 from .output import precompute_json, provenance
 
 
@@ -66,6 +66,7 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     starts, then its spaces replace the optimised ones and the scene's usual starts are
     evaluated under shacc's rules (SPEC section 17). ``found``: a search already run for
     these scenes (its parameters are used, no search runs)."""
+    compile_cache.enable()  # from Python too, not only from the command line
     modes = tuple(modes)
     plain = tuple(m for m in modes if m != OPTIMIZED)
     parts: dict[str, tuple[Evaluation, int]] = {}

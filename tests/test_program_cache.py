@@ -82,3 +82,25 @@ def test_lean_locations_drop_the_stack_frames(monkeypatch):
         assert program_cache._key("f", (), tree, leaves) != framed
     finally:
         jax.config.update("jax_traceback_in_locations_limit", previous)
+
+
+def test_the_python_api_keeps_its_programs_too(tmp_path):
+    """A script or notebook that evaluates through ``sweeps.pipeline`` (no ``shacc``
+    command) turns the compile cache on by itself; SHACC_COMPILE_CACHE=off turns it off."""
+    import os
+    import subprocess
+    import sys
+
+    script = ("from geometry_precompute import load_scene, precompute, shipped_scene_paths\n"
+              "from sweeps.pipeline import evaluate_results\n"
+              "r = precompute(load_scene(shipped_scene_paths()[0]), {'start_grid': [2, 2]})\n"
+              "evaluate_results([r], modes=('baseline',))\n")
+    env = {k: v for k, v in os.environ.items() if k != "SHACC_COMPILE_CACHE"}
+    env.update(JAX_PLATFORMS="cpu", XDG_CACHE_HOME=str(tmp_path / "home"))
+    subprocess.run([sys.executable, "-c", script], env={**env, "SHACC_COMPILE_CACHE": "off"},
+                   check=True, timeout=300)
+    assert not (tmp_path / "home").exists()
+    subprocess.run([sys.executable, "-c", script], env=env, check=True, timeout=300)
+    compiled = tmp_path / "home" / "shacc" / "compiled"
+    assert list(compiled.glob("programs/export-*.bin"))
+    assert list(compiled.glob("xla/*-sealed"))
