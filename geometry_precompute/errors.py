@@ -1,6 +1,6 @@
 """The two kinds of fault a user can cause or meet, each one line.
 
-- :class:`InputError`: bad input (SPEC section 13). Every loader and public function
+- :class:`InputError`: bad input (reference/errors: bad input). Every loader and public function
   raises it for input it rejects; the message names the source (a file, or
   "<settings>" / "<arguments>" for values that came from elsewhere), the field and
   the rule. The command line prints it and exits with status 2.
@@ -75,3 +75,9 @@ class HostError(OSError):
             return error
         where = error.filename if error.filename is not None else path
         return cls(where, action, error.strerror or type(error).__name__)
+
+
+class SceneWarning(UserWarning):
+    """Legal but probably unintended input: scene content, or a value that looks like a
+    unit mistake (degrees for radians, centimetres for metres). The command line shows
+    each as one ``warning:`` line; the input is used as given."""

@@ -1,4 +1,4 @@
-"""Reading a scene (SPEC sections 3 and 13): a file (:func:`load_scene`) or a parsed
+"""Reading a scene (reference/scenes, errors): a file (:func:`load_scene`) or a parsed
 table (:func:`scene_from_dict`).
 
 ``scene.parse_scene`` validates every name, type, range and reference; then the
@@ -10,6 +10,7 @@ geometry is built (``precompute``, through ``bodies.check_bodies_apart``).
 
 from __future__ import annotations
 
+import math
 import warnings
 from pathlib import Path
 
@@ -21,6 +22,25 @@ from .templates import resolve_tasks
 
 
 def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file (TOML; the format is in docs/reference/scenes.md).
+
+    :param path: the file.
+    :returns: the :class:`~geometry_precompute.scene.Scene`, with its own ``[settings]``
+        (``scene.settings()`` gives them over the defaults).
+    :raises InputError: the file cannot be read, or a field breaks a rule; the message
+        names the file, the field and the rule.
+
+    Values that are legal but look like a unit mistake (a yaw above 2 pi, sizes or
+    positions that look like centimetres) give a :class:`SceneWarning`. Whether objects
+    interpenetrate is checked by :func:`~geometry_precompute.precompute.precompute`.
+
+    Example::
+
+        from geometry_precompute import load_scene, precompute
+        scene = load_scene("geometry_precompute/scenes/09_mug_behind_two.toml")
+        result = precompute(scene)          # C, clusters, Shrinking
+        print(scene.name, result.C_init, result.C_final)
+    """
     return scene_from_dict(read_toml(path, "a scene TOML file"), str(path))
 
 
@@ -32,10 +52,43 @@ def scene_from_dict(data, source: str = "<scene>") -> Scene:
     return scene
 
 
+# Legal values that are almost certainly a unit mistake (a warning names the field).
+CM_SIZE = 1.0       # m: an object radius, height or half extent above this looks like cm
+CM_POSITION = 5.0   # m: a position coordinate further out looks like cm (or mm)
+
+
+def _warn_units(scene: Scene) -> None:
+    """Warn, once per field, of values that look like degrees where radians are meant or
+    centimetres where metres are."""
+    def warn(field: str, text: str) -> None:
+        warnings.warn(SceneWarning(f"{scene.source}: {field}: {text}"), stacklevel=5)
+
+    for o in scene.objects:
+        where = f"objects[{o.id}]"
+        if abs(o.yaw) > 2 * math.pi:
+            warn(f"{where}.yaw", f"{o.yaw:g} rad is more than a full turn; if degrees were "
+                 f"meant, that is yaw = {math.radians(o.yaw):.4f} (or write yaw_deg = "
+                 f"{o.yaw:g})")
+        sizes = {"radius": o.radius, "height": o.height}
+        if o.half_extents is not None:
+            sizes = {f"half_extents[{i}]": v for i, v in enumerate(o.half_extents)}
+        for name, v in sizes.items():
+            if v is not None and v > CM_SIZE:
+                warn(f"{where}.{name}", f"{v:g} m is large for a {o.kind}; centimetres? "
+                     f"{v:g} cm is {v / 100:g} m")
+        far = [i for i, v in enumerate(o.position) if abs(v) > CM_POSITION]
+        if far:
+            warn(f"{where}.position", f"{list(o.position)} m is more than {CM_POSITION:g} m "
+                 f"from the origin; centimetres? that would be "
+                 f"{[round(v / 100, 6) for v in o.position]} m")
+
+
 def _warn_legal_oddities(scene: Scene, spaces) -> None:
-    """Two things a scene may hold that are legal but rarely meant (SPEC is silent):
-    identical tasks on one object, whose spaces coincide so that every rollout towards
-    either is ambiguous; and a handle grasp point inside another object's body."""
+    """Things a scene may hold that are legal but rarely meant: values that look like a
+    unit mistake (:func:`_warn_units`); identical tasks on one object, whose spaces
+    coincide so that every rollout towards either is ambiguous; and a handle grasp
+    point inside another object's body."""
+    _warn_units(scene)
     seen: dict[tuple, str] = {}
     for t in scene.tasks:
         key = (t.object, t.template, tuple(sorted(t.bounds.items())),

@@ -1,15 +1,15 @@
-"""The scene model and its TOML files (SPEC sections 3, 13 and 16).
+"""The scene model and its TOML files (reference/scenes, errors, settings).
 
 :func:`parse_scene` validates a parsed table (``source`` names where it came
 from): names, types, ranges and references; :func:`save_scene` writes the same
-format back. Every rule of SPEC section 13 raises
+format back. Every rule of bad input (reference/errors) raises
 :class:`~geometry_precompute.errors.InputError` naming the file, the field and
 the rule. The rules that need the templates (a template fits its object, bounds
 min <= init) are checked above this module (``loading``: ``load_scene``,
 ``scene_from_dict``); that objects do not interpenetrate needs coal and is checked
 where the geometry is built (``precompute``).
 
-One key beyond SPEC section 3 is accepted: an optional top-level
+One key beyond the scene format (reference/scenes) is accepted: an optional top-level
 ``description`` (one line of text), used by the shipped scenes.
 """
 
@@ -25,6 +25,7 @@ from typing import Any
 import tomli_w
 
 from .errors import InputError, shown
+from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
 from .fileio import MAX_DEPTH, check_depth, read_bytes_limited, write_atomic
 from .settings import (
     COORD_LIMIT,
@@ -110,7 +111,7 @@ class Scene:
 
     def settings(self, base: Settings = DEFAULTS,
                  overrides: Mapping[str, Any] | None = None) -> Settings:
-        """Settings in SPEC section 16's precedence: the scene's [settings] over the
+        """Settings in the settings' precedence: the scene's [settings] over the
         defaults, then ``overrides`` (command line or sweep axes) over those."""
         s = base.with_overrides(self.settings_overrides, self.source, "settings.")
         if overrides:
@@ -119,7 +120,9 @@ class Scene:
 
 
 _TOP_KEYS = {"name", "description", "objects", "tasks", "settings"}
-_OBJECT_KEYS = {"id", "kind", "position", "yaw", "radius", "height", "half_extents"}
+_OBJECT_KEYS = {"id", "kind", "position", "yaw", "yaw_deg", "radius", "height", "half_extents"}
+# Spellings in degrees, converted on load: the field, and the radian field it stands for.
+DEG_FIELDS = {"yaw_deg": "yaw", "half_angle_deg": "half_angle"}
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 
 
@@ -182,7 +185,13 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
         raise InputError(src, where + "kind", f"unknown object kind {shown(kind)} "
                          f"(known: {', '.join(OBJECT_KINDS)})")
     position = _vector(raw["position"], 3, src, where + "position")
-    yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
+    if "yaw" in raw and "yaw_deg" in raw:
+        raise InputError(src, where + "yaw_deg", "give yaw (rad) or yaw_deg, not both")
+    if "yaw_deg" in raw:
+        yaw = math.radians(_number(raw["yaw_deg"], src, where + "yaw_deg",
+                                   limit=math.degrees(YAW_LIMIT)))
+    else:
+        yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
     if kind == "box":
         for key in ("radius", "height"):
             if key in raw:
@@ -217,12 +226,31 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
         raise InputError(src, where + "template", f"{template} does not fit a {kind} "
                          f"(fits: {', '.join(TEMPLATE_OBJECTS[template])})")
     bounds_raw = raw.get("bounds", {})
-    _check_keys(bounds_raw, set(TEMPLATE_PARAMS[template]), set(), src, where + "bounds.")
+    params = set(TEMPLATE_PARAMS[template])
+    _check_keys(bounds_raw, params | {k for k, v in DEG_FIELDS.items() if v in params}, set(),
+                src, where + "bounds.")
     bounds = {}
-    for name, value in bounds_raw.items():
-        lo, hi = _vector(value, 2, src, f"{where}bounds.{name}", positive=True)
+    for key, value in bounds_raw.items():
+        name = DEG_FIELDS.get(key, key)
+        if key != name and name in bounds_raw:
+            raise InputError(src, f"{where}bounds.{key}", f"give {name} (rad) or {key}, "
+                             "not both")
+        if key != name:
+            lo, hi = _vector(value, 2, src, f"{where}bounds.{key}", positive=False)
+            if not (0 < lo < 90 and 0 < hi < 90):
+                raise InputError(src, f"{where}bounds.{key}", f"must be two angles in "
+                                 f"(0, 90) degrees, got {shown(value)}")
+            lo, hi = math.radians(lo), math.radians(hi)
+        elif name == "half_angle":
+            lo, hi = _vector(value, 2, src, f"{where}bounds.{key}")
+            if not (0 < lo < math.pi / 2 and 0 < hi < math.pi / 2):
+                raise InputError(src, f"{where}bounds.{key}", f"must be two angles in "
+                                 f"(0, pi/2) rad, got {shown(value)} (degrees? write "
+                                 f"half_angle_deg = {shown(value)})")
+        else:
+            lo, hi = _vector(value, 2, src, f"{where}bounds.{name}", positive=True)
         if lo > hi:
-            raise InputError(src, f"{where}bounds.{name}", f"min {lo} > init {hi}")
+            raise InputError(src, f"{where}bounds.{key}", f"min {lo} > init {hi}")
         bounds[name] = (lo, hi)
     fixed_raw = raw.get("fixed", {})
     _check_keys(fixed_raw, set(TEMPLATE_FIXED[template]), set(), src, where + "fixed.")
@@ -232,8 +260,8 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
 
 
 def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
-    """Validate a parsed scene table's names, types, ranges and references (SPEC
-    sections 3 and 13) and build a Scene."""
+    """Validate a parsed scene table's names, types, ranges and references (docs/reference/scenes.md
+    and errors.md) and build a Scene."""
     src = str(source)
     check_depth(data, src)
     _check_keys(data, _TOP_KEYS, {"name"}, src, "")
@@ -267,10 +295,6 @@ def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
     scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), settings_raw,
                   description, src)
     return scene
-
-
-class SceneWarning(UserWarning):
-    """Legal but probably unintended scene content (shown once per scene and message)."""
 
 
 def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:

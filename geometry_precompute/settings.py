@@ -1,4 +1,4 @@
-"""Every setting of SPEC section 16, with its default, type, rule and stage.
+"""Every setting of the settings (reference/settings), with its default, type, rule and stage.
 
 This module is the one place that holds defaults. A setting is read by its
 flat name (``settings["dt"]``, ``settings["side_grasp.radius_init"]``), and a
@@ -11,7 +11,7 @@ it changes:
 - ``precompute``: the CPU geometry (spaces, C, clusters, Shrinking);
 - ``starts``: the start poses (cheap NumPy, part of the bake);
 - ``rollout``: numeric inputs of the jitted evaluation (never recompiles);
-- ``optimize``: the search of the ``optimized`` mode (SPEC section 17; its starts are
+- ``optimize``: the search of the ``optimized`` mode (reference/model; its starts are
   part of the bake, its sizes are static shapes of the search's program);
 - ``analysis``: statistics only.
 """
@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
-from .errors import InputError, shown
+from .errors import InputError, SceneWarning, shown
 from .fileio import check_depth
 
 
@@ -38,6 +38,7 @@ class SettingSpec:
     check: Callable[[Any], bool]
     choices: tuple[str, ...] = ()
     doc: str = ""  # one line of meaning, shown by `shacc settings`
+    schema: Mapping[str, Any] = field(default_factory=dict)  # the rule, as JSON Schema
 
 
 # Ranges (issue: inputs past the numeric ranges). Every number has a finite range, so
@@ -52,18 +53,32 @@ MAX_GRID_SIDE = 1 << 16
 
 
 def _range(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False):
-    """(rule text, check) for a number in [lo, hi] (open ends where asked)."""
+    """(rule text, check, JSON Schema) for a number in [lo, hi] (open ends where asked)."""
     def fmt(v: float) -> str:
         return str(int(v)) if float(v).is_integer() else f"{v:g}"
     rule = f"must be in {'(' if lo_open else '['}{fmt(lo)}, {fmt(hi)}{')' if hi_open else ']'}"
 
     def check(x: float) -> bool:
         return (lo < x if lo_open else lo <= x) and (x < hi if hi_open else x <= hi)
-    return rule, check
+    schema = {"exclusiveMinimum" if lo_open else "minimum": lo,
+              "exclusiveMaximum" if hi_open else "maximum": hi}
+    return rule, check, schema
+
+
+_TYPES = {"float": {"type": "number"}, "int": {"type": "integer"},
+          "choice": {"type": "string"},
+          "int_pair": {"type": "array", "items": {"type": "integer"}, "minItems": 2,
+                       "maxItems": 2},
+          "float_pair": {"type": "array", "items": {"type": "number"}, "minItems": 2,
+                         "maxItems": 2}}
 
 
 def _spec(name: str, default: Any, kind: str, stage: str, rng: tuple, choices=()):
-    return SettingSpec(name, default, kind, stage, rng[0], rng[1], tuple(choices))
+    schema = {**_TYPES[kind], **(rng[2] if len(rng) > 2 else {})}
+    if choices:
+        schema["enum"] = list(choices)
+    return SettingSpec(name, default, kind, stage, rng[0], rng[1], tuple(choices),
+                       schema=schema)
 
 
 def _choice(*options: str) -> tuple:
@@ -72,12 +87,17 @@ def _choice(*options: str) -> tuple:
 
 _POS_LEN = _range(0, LENGTH_LIMIT, lo_open=True)
 _NONNEG_LEN = _range(0, LENGTH_LIMIT)
-_HALF_ANGLE = ("must be in (0, pi/2)", lambda x: 0 < x < math.pi / 2)
+_HALF_ANGLE = ("must be in (0, pi/2)", lambda x: 0 < x < math.pi / 2,
+               {"exclusiveMinimum": 0, "exclusiveMaximum": math.pi / 2})
+# The product and the order of two items are rules a JSON Schema cannot state (listed in
+# the schema's description by geometry_precompute.file_schema).
 _GRID = (f"must be two integers in [1, {MAX_GRID_SIDE}] with n_y * n_z <= {MAX_STARTS}",
          lambda x: 1 <= x[0] <= MAX_GRID_SIDE and 1 <= x[1] <= MAX_GRID_SIDE
-         and x[0] * x[1] <= MAX_STARTS)
+         and x[0] * x[1] <= MAX_STARTS,
+         {"items": {"type": "integer", "minimum": 1, "maximum": MAX_GRID_SIDE}})
 _Z_RANGE = (f"must be two numbers [low, high] in [-{COORD_LIMIT:g}, {COORD_LIMIT:g}] with "
-            "low <= high", lambda x: -COORD_LIMIT <= x[0] <= x[1] <= COORD_LIMIT)
+            "low <= high", lambda x: -COORD_LIMIT <= x[0] <= x[1] <= COORD_LIMIT,
+            {"items": {"type": "number", "minimum": -COORD_LIMIT, "maximum": COORD_LIMIT}})
 
 _SPECS: list[SettingSpec] = [
     # At most ceil(1 / sigma) passes: the lower bound keeps that to a thousand.
@@ -98,7 +118,7 @@ _SPECS: list[SettingSpec] = [
           ("random", "forward")),
     _spec("seed", 0, "int", "starts", _range(0, INT32_MAX)),
     _spec("collision", "off", "choice", "rollout", _choice("off", "mjx"), ("off", "mjx")),
-    # The gripper of collision = "mjx" (SPEC section 12b): two finger capsules along the
+    # The gripper of collision = "mjx" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
     _spec("gripper.finger_radius", 0.008, "float", "rollout", _range(0, 1, lo_open=True)),
@@ -108,26 +128,26 @@ _SPECS: list[SettingSpec] = [
     _spec("entropy_variant", "formula", "choice", "precompute",
           _choice("formula", "reference_code"), ("formula", "reference_code")),
     _spec("bootstrap_resamples", 10000, "int", "analysis", _range(100, 10**7)),
-    # The optimized mode's search (SPEC section 17). A population of at least 4 is what
+    # The optimized mode's search (reference/model). A population of at least 4 is what
     # CMA-ES needs to adapt; the products of these sizes bound the search's work.
     _spec("optimize_starts", 64, "int", "optimize", _range(1, 1 << 16)),
     _spec("optimize_seed", 1, "int", "optimize", _range(0, INT32_MAX)),
     _spec("optimize_population", 64, "int", "optimize", _range(4, 4096)),
     _spec("optimize_generations", 30, "int", "optimize", _range(1, 10000)),
-    # Selection by validation (SPEC section 17, revised): a third set of starts, its own
+    # Selection by validation (reference/model, revised): a third set of starts, its own
     # seed, the search's best few distinct candidates (a static size of its program).
     _spec("optimize_validation_starts", 256, "int", "optimize", _range(1, 1 << 16)),
     _spec("optimize_validation_seed", 2, "int", "optimize", _range(0, INT32_MAX)),
     _spec("optimize_candidates", 8, "int", "optimize", _range(1, 64)),
     _spec("optimize_selection", "validation", "choice", "optimize",
           _choice("validation", "search"), ("validation", "search")),
-    # Template defaults (SPEC section 3's table).
+    # Template defaults (the scene format's table).
     _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN),
     _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN),
     _spec("side_grasp.height_margin", 0.05, "float", "precompute", _NONNEG_LEN),
     _spec("handle_grasp.length_init", 0.30, "float", "precompute", _POS_LEN),
     _spec("handle_grasp.length_min", 0.10, "float", "precompute", _POS_LEN),
-    # 30 and 10 degrees exactly; SPEC writes them rounded as 0.5236 and 0.1745.
+    # 30 and 10 degrees exactly; not the rounded 0.5236 and 0.1745.
     _spec("handle_grasp.half_angle_init", math.radians(30.0), "float", "precompute",
           _HALF_ANGLE),
     _spec("handle_grasp.half_angle_min", math.radians(10.0), "float", "precompute",
@@ -141,7 +161,7 @@ _SPECS: list[SettingSpec] = [
     _spec("drawer_pull.depth_min", 0.08, "float", "precompute", _POS_LEN),
 ]
 
-# One line of meaning per setting (SPEC sections 3, 5, 7, 9, 10, 12b and 16).
+# One line of meaning per setting (reference/scenes, model, statistics, mujoco, settings).
 _DOCS = {
     "shrink_step": "Shrinking's step: the fraction of its range a space loses per pass (sigma)",
     "shrink_max_iter": "most Shrinking passes",
@@ -209,7 +229,7 @@ def describe() -> list[dict[str, str]]:
                      "rule": s.rule, "stage": s.stage, "meaning": s.doc})
     return rows
 
-# Object dimensions (SPEC section 3): per-object fields of a scene file, not settings,
+# Object dimensions (reference/scenes): per-object fields of a scene file, not settings,
 # but defaults all the same, so they live here too.
 OBJECT_DEFAULTS: Mapping[str, Mapping[str, float]] = MappingProxyType({
     "mug": MappingProxyType({"radius": 0.045, "height": 0.10}),
@@ -262,7 +282,34 @@ def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
             value = tuple(float(v) for v in value)
     if not spec.check(value):
         raise bad(spec.rule + f", got {shown(value)}")
+    _warn_unit(spec, value, source, field)
     return value
+
+
+# Legal settings that are almost certainly a unit mistake (a warning, not an error).
+OMEGA_LIMIT = 20 * math.pi   # rad/s: ten turns a second; degrees per second were meant
+TEMPLATE_LENGTH_LIMIT = 1.0  # m: a template size above this looks like centimetres
+
+
+def _warn_unit(spec: SettingSpec, value: Any, source: str, field: str) -> None:
+    import warnings
+
+    text = None
+    if spec.name == "omega_max" and value > OMEGA_LIMIT:
+        text = (f"{value:g} rad/s is more than ten turns a second; if degrees per second "
+                f"were meant, that is {math.radians(value):.4f} rad/s")
+    elif (spec.name.split(".")[0] in ("side_grasp", "handle_grasp", "top_grasp",
+                                       "drawer_pull") and "angle" not in spec.name
+          and spec.kind == "float" and value > TEMPLATE_LENGTH_LIMIT):
+        text = f"{value:g} m is a very large task space; centimetres? {value:g} cm is " \
+               f"{value / 100:g} m"
+    message = f"{source}: {field}: {text}"
+    if text and message not in _WARNED:  # settings are validated again at every override
+        _WARNED.add(message)
+        warnings.warn(SceneWarning(message), stacklevel=4)
+
+
+_WARNED: set[str] = set()
 
 
 def _cli_number(name: str, text: str) -> int | float:
@@ -300,7 +347,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
 
     ``side_grasp.radius_init = 0.18`` written bare is read by TOML as the table
     ``{"side_grasp": {"radius_init": 0.18}}``; quoted, as the key
-    ``"side_grasp.radius_init"``. Both mean one setting (SPEC section 16), so every
+    ``"side_grasp.radius_init"``. Both mean one setting (reference/settings: the settings), so every
     reader of a settings table (scenes, sweep axes, points and fixed settings) calls
     this first. Both forms of one name in one table are an error, not a silent pick.
     Names are not checked here: the caller's validation sees the full dotted name, so
@@ -328,7 +375,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
 
 
 class Settings(Mapping[str, Any]):
-    """An immutable, validated set of every setting of SPEC section 16."""
+    """An immutable, validated set of every setting of the settings (reference/settings)."""
 
     __slots__ = ("_values",)
 
