@@ -1,0 +1,68 @@
+"""``shacc schema scene|sweep``: the JSON Schema of a scene file or a sweep config,
+built from the loaders' own definitions (``geometry_precompute.file_schema`` for scenes
+and settings; the sweep config's keys and limits from ``sweeps.config``)."""
+
+from __future__ import annotations
+
+import json
+
+from geometry_precompute.file_schema import DRAFT, _vector, settings_schema
+from geometry_precompute.generate import MAX_TASKS, PRESETS
+from geometry_precompute.schema import ALL_MODES
+from geometry_precompute.settings import INT32_MAX
+
+from .config import MAX_CHUNK, MAX_COUNT
+
+LOADER_ONLY = [
+    "source.path names a folder holding *.toml scene files",
+    "source.tasks: min <= max; source.seed + source.count stays a 32-bit integer",
+    "the axes and [[points]] give at most 100 000 points",
+    "every template of the settings fits the scenes' objects",
+    "the rules of a scene's [settings] that a schema cannot state, for every value",
+]
+
+
+def sweep_schema() -> dict:
+    """The JSON Schema of a sweep config (``sweeps.config``)."""
+    random_source = {
+        "type": "object", "required": ["kind", "count"],
+        "properties": {"kind": {"const": "random"},
+                       "count": {"type": "integer", "minimum": 1, "maximum": MAX_COUNT},
+                       "tasks": _vector(2, {"type": "integer", "minimum": 1,
+                                            "maximum": MAX_TASKS}),
+                       "sampling": {"enum": ["uniform", "gaussian", "both"]},
+                       "seed": {"type": "integer", "minimum": 0, "maximum": INT32_MAX},
+                       "preset": {"enum": list(PRESETS)}},
+        "additionalProperties": False}
+    files_source = {
+        "type": "object", "required": ["kind", "path"],
+        "properties": {"kind": {"const": "files"}, "path": {"type": "string"}},
+        "additionalProperties": False}
+    return {
+        "$schema": DRAFT,
+        "title": "ShaCC sweep config",
+        "description": "A sweep config (README, Sweeps). Checked by the loader only: "
+                       + "; ".join(LOADER_ONLY) + ".",
+        "type": "object",
+        "required": ["source"],
+        "properties": {
+            "name": {"type": "string", "minLength": 1},
+            "modes": {"type": "array", "minItems": 1, "uniqueItems": True,
+                      "items": {"enum": list(ALL_MODES)}},
+            "chunk": {"type": "integer", "minimum": 1, "maximum": MAX_CHUNK},
+            "source": {"oneOf": [random_source, files_source]},
+            "settings": settings_schema(),
+            "axes": settings_schema(values_as_lists=True),
+            "points": {"type": "array", "items": settings_schema()},
+            "scheduler": {"type": "string", "pattern": r"\S"},
+        },
+        "additionalProperties": False,
+    }
+
+
+def cmd_schema(args) -> int:
+    from geometry_precompute.file_schema import scene_schema
+
+    schema = scene_schema() if args.kind == "scene" else sweep_schema()
+    print(json.dumps(schema, indent=1))
+    return 0
