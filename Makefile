@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE ?= geometry_precompute/scenes/09_mug_behind_two.toml
 
-.PHONY: demo test lint bench clean notebooks
+.PHONY: demo test lint bench clean notebooks docs
 
 $(BIN)/shacc: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -32,3 +32,8 @@ FIGURES ?= $(NOTEBOOKS_OUT)
 notebooks: $(BIN)/shacc
 	mkdir -p $(NOTEBOOKS_OUT) $(FIGURES)
 	$(BIN)/python -m sweeps.notebook_runner --out $(NOTEBOOKS_OUT) -p FIGURES=$(abspath $(FIGURES))
+
+# The reference as a site in build/site (warnings are errors); its generated tables first.
+docs: $(BIN)/shacc
+	$(BIN)/python -m sweeps.reference
+	$(BIN)/mkdocs build --strict

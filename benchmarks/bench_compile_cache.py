@@ -9,7 +9,7 @@ for the accelerator machine) evaluates a bake of ``bench_rollouts.py bake`` with
 turns it on, and once more with it off, and checks that the outcomes agree. Each
 repeat uses a fresh cache folder: run 1 compiles and stores the programs, run 2 loads
 them. Prints the wall times (whole process, imports included) and their ratio;
-asserts nothing (SPEC: targets are checked in benchmarks, never in tests).
+asserts nothing (performance targets are checked in benchmarks, never in tests).
 """
 
 from __future__ import annotations

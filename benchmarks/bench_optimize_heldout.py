@@ -1,4 +1,4 @@
-"""Does the optimized mode lose to Shrinking on starts it did not see? (SPEC section 17)
+"""Does the optimized mode lose to Shrinking on starts it did not see? (reference/model)
 
 For random scenes (half ``uniform``, half ``gaussian``, 5 to 10 tasks) and the shipped
 manual scenes, the optimized mode is run twice, with ``optimize_selection = search``

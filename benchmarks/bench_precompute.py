@@ -1,4 +1,4 @@
-"""Precompute time of a 10-task random scene (SPEC section 14): spaces, C_init,
+"""Precompute time of a 10-task random scene (reference/index): spaces, C_init,
 clusters, Shrinking, C_final and d, h, then the bake, on one core.
 
     python benchmarks/bench_precompute.py [--scenes 20] [--sections 32] [--repeat 5]

@@ -1,4 +1,4 @@
-"""Rollout throughput of the jitted evaluation (SPEC section 14).
+"""Rollout throughput of the jitted evaluation (reference/index: the performance targets).
 
 Two steps, so the accelerator machine needs only JAX and ``shacc_jax``:
 

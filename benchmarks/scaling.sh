@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Scaling of the end-to-end sweep over precompute workers (SPEC section 14, issue 14):
+# Scaling of the end-to-end sweep over precompute workers (the performance targets (reference/index), issue 14):
 # the e2e config at COUNT scenes, once per worker count, each from an empty precompute
 # cache with the compiled programs kept (a first small sweep of the same shapes fills
 # the compilation cache, so every timed run loads the same programs).

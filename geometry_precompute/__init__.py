@@ -54,7 +54,13 @@ sys.modules[__name__].__class__ = _Package
 
 def shipped_scene_paths() -> list[Path]:
     """The manual scenes that ship with the package, in file-name order: the twelve of
-    the paper's experiment (``reproduce`` uses these), not the ``extra`` ones."""
+    the paper's experiment (``reproduce`` uses these), not the ``extra`` ones.
+
+    Example::
+
+        from geometry_precompute import load_scene, shipped_scene_paths
+        scenes = [load_scene(p) for p in shipped_scene_paths()]   # 12 scenes
+    """
     from importlib.resources import files
 
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes").iterdir()

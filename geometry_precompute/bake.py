@@ -1,4 +1,4 @@
-"""The bake: precomputed scenes as fixed-shape NumPy arrays (SPEC section 15).
+"""The bake: precomputed scenes as fixed-shape NumPy arrays (reference/index: the layout).
 
 This is the only bridge between the CPU half and the JAX half: ``shacc_jax``
 reads these arrays by name and nothing else. S scenes are padded to T tasks
@@ -11,7 +11,7 @@ schema's (``schema.py``: GEOMETRY, PARAMS, SEARCH); floats are float64 here, the
 JAX side casts them to its working precision. ``BakedScenes.layout`` computes the
 batch's static :class:`~geometry_precompute.schema.Layout` in NumPy.
 
-The ``optimized`` mode's search (SPEC section 17) builds spaces for any parameter
+The ``optimized`` mode's search (reference/model) builds spaces for any parameter
 vector on the accelerator. Every template's space is affine in its shrinkable
 parameters q (P = 2 slots: the most any template has), so the bake carries that
 map (``center_dq``, ``dims_dq``) and checks it at each template's midpoint.
@@ -197,10 +197,23 @@ def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
 
 def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
          starts: np.ndarray | None = None, max_objects: int | None = None) -> BakedScenes:
-    """Bake precomputed scenes; ``starts`` (N, 7) or (S, N, 7) overrides the
-    settings' start grid (quaternions are validated and normalised). ``max_tasks`` and
-    ``max_objects`` pad the task and object axes to at least that size (a sweep's
-    chunks share their shapes so)."""
+    """Bake precomputed scenes into fixed-shape arrays, the one input of the JAX half.
+
+    :param results: S precomputed scenes (:func:`precompute`).
+    :param max_tasks: pad the task axis T to at least this (default: the most tasks).
+    :param starts: (N, 7) or (S, N, 7) start poses ``[x, y, z, qw, qx, qy, qz]`` (m,
+        unit quaternion w first) instead of the settings' grid (quaternions are
+        validated and normalised).
+    :param max_objects: pad the object axis to at least this.
+    :returns: a :class:`BakedScenes` (``geometry_precompute/schema.py`` lists every
+        array and its shape); ``shacc_jax.inputs`` splits it into Geometry, Params and
+        Layout. A sweep's chunks share their padded shapes, so they share one program.
+
+    Example::
+
+        baked = bake([precompute(load_scene(p)) for p in shipped_scene_paths()])
+        baked.starts.shape      # (12, 36, 7)
+    """
     if not results:
         raise InputError("<bake>", "results", "needs at least one precomputed scene")
     n_max = max(len(r.spaces) for r in results)

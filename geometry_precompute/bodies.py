@@ -1,4 +1,4 @@
-"""Object bodies as shapes, and SPEC section 13's rule that they do not interpenetrate.
+"""Object bodies as shapes, and the bad-input rules' rule that they do not interpenetrate.
 
 The rule needs coal's distances, so it is checked where the geometry is built
 (``precompute`` calls :func:`check_bodies_apart`), not when a scene file is read:
@@ -34,7 +34,7 @@ def inside(body: Shape, p) -> bool:
 
 
 def check_bodies_apart(scene: Scene) -> None:
-    """SPEC section 13: objects must not interpenetrate (coal distance below -1e-6 m)."""
+    """Objects must not interpenetrate (coal distance below -1e-6 m; reference/errors)."""
     from .intersect import SpaceSet
 
     bodies = SpaceSet([object_body(o) for o in scene.objects])

@@ -1,4 +1,4 @@
-"""Clutteredness C (SPEC section 5, the paper's eq. 1).
+"""Clutteredness C (clutteredness (reference/model), the paper's eq. 1).
 
 C = sum_{i<j} V(p_i ∩ p_j) / sum_i V(p_i). Two ways to get the numerator:
 

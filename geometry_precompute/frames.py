@@ -1,4 +1,4 @@
-"""Frames and quaternions on the CPU side (SPEC section 2), in float64.
+"""Frames and quaternions on the CPU side (reference/conventions: the conventions), in float64.
 
 Quaternions are (w, x, y, z). scipy's Rotation uses (x, y, z, w): conversions from
 matrices go through :func:`quat_from_matrix`; ``shapes.rotation_matrix`` goes back.
@@ -14,7 +14,7 @@ IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 def frame_from_approach(a) -> np.ndarray:
-    """SPEC section 2: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;
+    """reference/conventions: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;
     x = normalize(u x z); y = z x x. Returns the 3x3 matrix [x y z] (columns).
 
     Written out in floats: 4 us against 70 us through np.cross and np.linalg.norm,

@@ -1,4 +1,4 @@
-"""Seeded random scenes (SPEC section 11's random set).
+"""Seeded random scenes (the experiments' random set).
 
 Each scene has ``n_tasks`` objects (uniform in [min_tasks, max_tasks]), one
 task each: a mug with a side grasp or a cup with a handle grasp, with equal

@@ -1,4 +1,4 @@
-"""SPEC section 6's intersection test.
+"""the clusters' intersection test.
 
 Two spaces *intersect* when they overlap by more than 1e-9 m (coal's signed
 distance below -1e-9 m; touching does not count). Two upright cylinders or disks

@@ -1,4 +1,4 @@
-"""A precomputed scene as MJCF (SPEC section 12b): a table, the objects as collidable
+"""A precomputed scene as MJCF (reference/mujoco): a table, the objects as collidable
 geoms (cylinders, boxes), and the position spaces as visual-only translucent geoms,
 initial in red and optimised in blue. MuJoCo has no cone geom, so cones become meshes
 (the manifold3d meshes of :mod:`geometry_precompute.meshes`, vertices in world

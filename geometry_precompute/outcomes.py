@@ -1,4 +1,4 @@
-"""Per-scene metrics of rollouts (SPEC section 10), in NumPy and double precision.
+"""Per-scene metrics of rollouts (reference/statistics), in NumPy and double precision.
 
 What every table, printout and JSON file reports, from the joined rollouts of a batch:
 u_scene = successes / rollouts as an exact fraction of counts, the mean delta_R over

@@ -1,4 +1,4 @@
-"""Intersection volumes of position spaces without a mesh boolean (SPEC section 5's
+"""Intersection volumes of position spaces without a mesh boolean (clutteredness's
 fast paths).
 
 Three pair types, computed for all pairs of a scene at once, cover every

@@ -64,11 +64,23 @@ class PrecomputeResult:
 
 def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = None
                ) -> PrecomputeResult:
-    """C, clusters, Shrinking, C_final, d and h of one scene.
+    """C, clusters, Shrinking, C_final, d and h of one scene, on the CPU in float64.
 
-    ``settings``: a :class:`Settings`, or a plain mapping of overrides (validated over
-    the scene's own ``[settings]``, as ``--set`` is: a bad name or value raises
-    :class:`InputError`), or None for the scene's settings."""
+    :param scene: a validated :class:`Scene` (``load_scene``, ``random_scene``).
+    :param settings: a :class:`Settings`, or a plain mapping of overrides (validated
+        over the scene's own ``[settings]``, as ``--set`` is: a bad name or value raises
+        :class:`InputError`), or None for the scene's settings.
+    :returns: a :class:`PrecomputeResult`: ``C_init`` and ``C_final`` (dimensionless),
+        ``clusters`` (task indices), the spaces before and after Shrinking
+        (``spaces``, ``q_opt``: parameters in m and rad), ``d`` (m), ``h`` and the
+        settings used. Objects that interpenetrate raise :class:`InputError`.
+
+    Example::
+
+        r = precompute(load_scene("geometry_precompute/scenes/09_mug_behind_two.toml"),
+                       {"shrink_step": 0.02, "start_grid": [12, 12]})
+        r.C_init, r.C_final, r.shrunk_params()
+    """
     if not isinstance(scene, Scene):
         raise InputError("<precompute>", "scene", f"must be a Scene (load_scene), got "
                          f"{type(scene).__name__}")
@@ -91,7 +103,7 @@ def precompute(scene: Scene, settings: Settings | Mapping[str, Any] | None = Non
     pairs = coll.intersecting_pairs()
     clusters = clusters_from_pairs(len(spaces), pairs)
     t2 = time.perf_counter()
-    if pairs:  # SPEC section 7: a scene with C_init = 0 is left as it is (below)
+    if pairs:  # Shrinking (reference/model): a scene with C_init = 0 is left as it is (below)
         res = shrink(spaces, s["shrink_step"], s["shrink_max_iter"], space_set=coll,
                      pairs=pairs)
         q_opt, iterations, still = res.q_opt, res.iterations, res.still_intersecting

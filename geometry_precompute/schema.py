@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
-# Modes and outcomes (SPEC sections 9, 10 and 17).
+# Modes and outcomes (reference/model, statistics).
 MODES = ("baseline", "shrinking", "shacc")
 # The fourth mode: shacc's rules on the spaces the search found; it needs the search
 # first (shacc_jax.optimize), so ``shacc_jax.evaluate`` computes MODES only.
@@ -38,7 +38,7 @@ INVALID = -1  # the rollout's intended task is a padded (masked) task
 KINDS = ("cylinder", "disk", "cone", "box")
 CYLINDER, DISK, CONE, BOX = range(4)
 KIND_CODES = {name: i for i, name in enumerate(KINDS)}
-# Orientation-space kinds (SPEC section 5).
+# Orientation-space kinds (reference/model: clutteredness).
 ORIENT_KINDS = ("fixed", "point_to_axis")
 FIXED, POINT_TO_AXIS = range(2)
 

@@ -1,4 +1,4 @@
-"""Shrinking (SPEC section 7), with the answers of its pseudocode.
+"""Shrinking (reference/model: Shrinking), with the answers of its pseudocode.
 
 All spaces that intersect another (section 6's test) and can still shrink lose
 the same fraction ``sigma`` of their own parameter range at once, until no space
@@ -70,7 +70,7 @@ class ShrinkResult:
 def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 1000,
            space_set: SpaceSet | None = None, history: list | None = None,
            pairs: Sequence[tuple[int, int]] | None = None) -> ShrinkResult:
-    """SPEC section 7's loop (module docstring). ``space_set`` (the initial spaces) is
+    """Shrinking's loop (module docstring). ``space_set`` (the initial spaces) is
     reused and updated in place when given, ``pairs`` (its intersecting pairs)
     likewise; ``history``, when given, receives every task's parameters after each
     pass."""

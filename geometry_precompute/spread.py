@@ -1,4 +1,4 @@
-"""Object-distribution measures the paper compares C with (SPEC sections 5, 10).
+"""Object-distribution measures the paper compares C with (reference/model, statistics).
 
 - d: mean Euclidean distance of the objects' base centres to their centroid.
 - h: the entropic clutteredness of Schmidt-Wolf et al. ("Through the Clutter",

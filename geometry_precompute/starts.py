@@ -1,4 +1,4 @@
-"""Start poses of the Automaton (SPEC section 9).
+"""Start poses of the Automaton (reference/model: the Automaton).
 
 A grid of n_y x n_z points on the vertical plane x = min(object x) - offset,
 y in [y_c - w, y_c + w] (y_c the mean object y), z in the height band, ordered
@@ -8,7 +8,7 @@ rotation per grid point from ``numpy.random.default_rng(seed)`` through
 scipy's ``Rotation.random`` (so they depend on the seed and grid size only,
 not on the scene), or frame_from_approach((1, 0, 0)) for ``"forward"``.
 
-The ``optimized`` mode's search scores candidates on other starts (SPEC section 17):
+The ``optimized`` mode's search scores candidates on other starts (reference/model):
 ``optimize_starts`` positions drawn uniformly on the same rectangle of the same plane,
 then as many orientations from the same generator, all from
 ``numpy.random.default_rng(optimize_seed)`` (positions first, then orientations), so

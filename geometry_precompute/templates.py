@@ -1,6 +1,6 @@
 """Skill templates: from a task to its position space and orientation space.
 
-SPEC section 3's table, with every default read from the settings and the
+the scene format's table, with every default read from the settings and the
 task's own ``[tasks.bounds]`` / ``[tasks.fixed]`` taking precedence. A
 :class:`TaskSpace` knows its shrinkable parameters (names, min, init) and
 builds its :class:`~geometry_precompute.shapes.Shape` for any parameter
@@ -63,7 +63,7 @@ class TaskSpace:
 
 
 def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """The cup handle's grasp point g and direction u (SPEC section 3)."""
+    """The cup handle's grasp point g and direction u (reference/scenes: the scene format)."""
     u = np.array([np.cos(obj.yaw), np.sin(obj.yaw), 0.0])
     g = np.asarray(obj.position) + (obj.radius + offset) * u + np.array([0, 0, obj.height / 2])
     return g, u

@@ -1,4 +1,4 @@
-"""The Automaton rollout of SPEC section 9, for one scene, one start, one task.
+"""The Automaton rollout of the Automaton (reference/model), for one scene, one start, one task.
 
 The step rule moves p towards c, the closest point of the target's space P_i,
 by at most s = v_max dt per step. For a convex P_i every point of the segment
@@ -137,7 +137,7 @@ class Outcome(NamedTuple):
 
 def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Array,
              nearest_rule: Bool[Array, ""]) -> Outcome:
-    """SPEC section 9's outcomes. ``activated`` is the task of A with the smallest
+    """the Automaton's outcomes. ``activated`` is the task of A with the smallest
     sdf, the lower index on a tie, -1 on timeout. Values within ``TIE`` (1e-6 m) of
     the smallest count as tied: at a landing point on the boundary of two spaces
     (symmetric scenes) the two sdfs differ only by rounding, and a fixed tolerance
@@ -175,7 +175,7 @@ def meta_window(init: shapes.Prepared, mask: Bool[Array, " T"], cluster: Int[Arr
 
 def rotate_along(r0: Float[Array, "4"], inside: Bool[Array, " W"], targets: Float[Array, "W 4"],
                  max_angle: Array) -> tuple[Float[Array, "4"], Int[Array, ""]]:
-    """SPEC section 9's rotation rule over W consecutive samples: R turns towards each
+    """the Automaton's rotation rule over W consecutive samples: R turns towards each
     sample's R_M by at most ``max_angle`` where the sample is in a meta region. The
     targets do not depend on R, so they are computed for all samples beforehand (in
     parallel); only this scan is sequential."""
@@ -207,6 +207,6 @@ def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> 
 
 
 def delta_r(outcome: Outcome, r: Float[Array, "4"], orient, target: Int[Array, ""]) -> Array:
-    """SPEC section 9's delta_R, for successes only (NaN otherwise)."""
+    """the Automaton's delta_R, for successes only (NaN otherwise)."""
     d = quat.angle(r, target_orientation(orient, target, outcome.point))
     return jnp.where(outcome.code == SUCCESS, d, jnp.nan)

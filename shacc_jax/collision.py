@@ -1,4 +1,4 @@
-"""Gripper-object collisions (SPEC sections 9, 12b), exact, on the accelerator.
+"""Gripper-object collisions (reference/model, mujoco), exact, on the accelerator.
 
 The gripper is three capsules posed by the EE pose (p, R): two fingers parallel to
 the approach axis (EE z), at EE y = +-opening/2, from the palm (z = -finger_length)

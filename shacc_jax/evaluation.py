@@ -243,7 +243,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
 
 
 def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
-    """SPEC section 9's ``collision`` outcome where the gripper penetrated an object at
+    """the Automaton's ``collision`` outcome where the gripper penetrated an object at
     sample ``hit`` (at or before the activation sample)."""
     found = jnp.isfinite(hit)
     k = jnp.where(found, hit, 0.0)
@@ -296,7 +296,20 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     :class:`~shacc_jax.types.Evaluation` whose rollout arrays are (S, M, N, T), or
     (P, S, M, N, T) with a points axis. Traceable: nothing reads array values on the
     host, so it may be wrapped (``jax.jit(...).lower``, ``shard_map``) like any JAX
-    function."""
+    function.
+
+    The rollouts (:class:`~shacc_jax.types.Rollouts`, each (S, M, N, T)): ``outcome``
+    (codes of ``shacc_jax.OUTCOMES``), ``activated`` (task index, -1 none), ``steps``,
+    ``delta_R`` (rad, NaN unless success), ``meta_steps``, ``path_length`` (m) and
+    more; the metrics (:class:`~shacc_jax.types.SceneMetrics`, (S, M)): ``u_scene``,
+    ``delta_R_mean`` (rad), ``outcome_counts`` (S, M, 5), ``n_rollouts``.
+
+    Example::
+
+        geometry, params, layout = shacc_jax.inputs(bake(results))
+        ev = shacc_jax.evaluate(geometry, params, layout)
+        ev.rollouts.outcome[0, 0]    # (N, T) outcome codes of scene 0, baseline
+    """
     points = _check_shapes(geometry, params, layout)
     S = geometry.task_mask.shape[0]
     if points:

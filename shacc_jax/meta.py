@@ -1,4 +1,4 @@
-"""The meta skill of SPEC section 8, at one EE position.
+"""The meta skill of the meta skill (reference/model), at one EE position.
 
 p is in the meta region p_M(K) of cluster K when sdf_i^init(p) <= tau for some
 member i of K (the Automaton only asks before activation, so p is outside
@@ -49,7 +49,7 @@ def meta_target_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array, 
 
 
 def inverse_square_weights(sd_opt: Array, in_cluster: Array) -> Array:
-    """SPEC section 8's unnormalised weights 1 / d_i^2, d_i = max(sdf_i^opt, 1e-6)."""
+    """the meta skill's unnormalised weights 1 / d_i^2, d_i = max(sdf_i^opt, 1e-6)."""
     d = jnp.maximum(sd_opt, MIN_DISTANCE)
     return jnp.where(in_cluster, 1.0 / (d * d), 0.0)
 

@@ -1,4 +1,4 @@
-"""Per-scene metrics of SPEC section 10, from the rollouts of one scene and mode.
+"""Per-scene metrics (reference/statistics), from the rollouts of one scene and mode.
 
 Two forms of the same definitions: :func:`batch_metrics` inside the jitted
 evaluation (working precision, on the device) and :func:`host_metrics` in NumPy,

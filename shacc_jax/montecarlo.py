@@ -1,4 +1,4 @@
-"""An independent estimate of C from the SDFs (SPEC section 5).
+"""An independent estimate of C from the SDFs (reference/model: clutteredness).
 
 Points are drawn uniformly inside each space i (exact inverse-CDF sampling per
 kind); the fraction f_ij of them inside space j estimates V(p_i ∩ p_j) / V_i.

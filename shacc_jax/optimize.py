@@ -1,4 +1,4 @@
-"""The ``optimized`` mode's search (SPEC section 17): for each scene, the sizes of its
+"""The ``optimized`` mode's search (reference/model): for each scene, the sizes of its
 task spaces, within Shrinking's bounds, that make the most rollouts succeed.
 
 A candidate is every task's shrinkable parameters q, each within [q_min, q_init].

@@ -1,4 +1,4 @@
-"""Orientation spaces (SPEC sections 2 and 3): the EE orientation a task wants
+"""Orientation spaces (reference/conventions, scenes): the EE orientation a task wants
 at an EE position p, as a quaternion.
 
 - fixed (kind 0): always ``quat``;
@@ -20,7 +20,7 @@ ON_AXIS = 1e-9
 
 
 def frame_from_approach(a: Float[Array, "3"]) -> Float[Array, "3 3"]:
-    """SPEC section 2: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;
+    """reference/conventions: z = a/|a|; u = world z, or world x where |z . world z| > 0.99;
     x = normalize(u x z); y = z x x. Columns are the EE axes."""
     z = a / quat.norm(a)
     u = jnp.where(jnp.abs(z[2]) > 0.99, jnp.array([1.0, 0.0, 0.0], a.dtype),

@@ -1,4 +1,4 @@
-"""Quaternion maths, (w, x, y, z), unit norm, q and -q the same rotation (SPEC 2).
+"""Quaternion maths, (w, x, y, z), unit norm, q and -q the same rotation (reference/conventions).
 
 Every function works on one quaternion (shape (4,)); batching is vmap's job.
 """
@@ -99,7 +99,7 @@ def from_matrix(m: Float[Array, "3 3"]) -> Float[Array, "4"]:
 
 
 def angle(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, ""]:
-    """SPEC section 2: 2 arccos(min(1, |<a, b>|))."""
+    """the conventions (reference/conventions): 2 arccos(min(1, |<a, b>|))."""
     return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(dot(a, b))))
 
 
@@ -111,7 +111,7 @@ def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
     At exactly opposite orientations (angle pi, <q, target> = 0) the two geodesics
     turn about +v and -v, v the relative rotation's axis in the EE frame. The tie
     is broken towards a positive turn about the EE's x axis (v . x > 0; then y,
-    then z where v . x = 0): our reading of SPEC section 9's rule.
+    then z where v . x = 0): our reading of the Automaton's rule.
     """
     d = dot(q, target)
     rel = multiply(conjugate(q), target)
@@ -135,7 +135,7 @@ def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
 
 def markley_average(quats: Float[Array, "n 4"], weights: Float[Array, " n"],
                     squarings: int = 24) -> Float[Array, "4"]:
-    """Weighted quaternion average of Markley et al. 2007 (SPEC section 8): the unit
+    """Weighted quaternion average of Markley et al. 2007 (reference/model): the unit
     eigenvector of the largest eigenvalue of M = sum_i w_i q_i q_i^T.
 
     Sign-invariant (q q^T is) and linear in the weights. The eigenvector comes from

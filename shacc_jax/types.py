@@ -102,7 +102,19 @@ SearchProblem = _pytree("SearchProblem", schema.SEARCH, _FromBake,
 
 def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,
            samples_per_block: int = 16) -> tuple[Geometry, Params, Layout]:
-    """(geometry, params, layout) of a bake, ready for ``shacc_jax.evaluate``."""
+    """(geometry, params, layout) of a bake, ready for ``shacc_jax.evaluate``.
+
+    :param baked: a ``geometry_precompute.bake`` result.
+    :param modes: the modes to evaluate, in this order (default baseline, shrinking,
+        shacc).
+    :param dtype: the float type of the arrays (default float32, float64 with x64 on).
+
+    Example::
+
+        geometry, params, layout = shacc_jax.inputs(bake(results))
+        ev = shacc_jax.evaluate(geometry, params, layout)
+        ev.metrics.u_scene          # (S, M) success per scene and mode
+    """
     from geometry_precompute.bake import batch_layout
 
     return (Geometry.from_bake(baked, dtype), Params.from_bake(baked, dtype),
@@ -143,7 +155,7 @@ class Rollouts(NamedTuple):
 
 
 class SceneMetrics(NamedTuple):
-    """Per scene and mode, shape (S, M, ...) (SPEC section 10)."""
+    """Per scene and mode, shape (S, M, ...) (reference/statistics: metrics and statistics)."""
 
     u_scene: Float[Array, "S M"]
     delta_R_mean: Float[Array, "S M"]  # NaN where a mode has no success

@@ -50,7 +50,7 @@ class _Help(argparse.ArgumentDefaultsHelpFormatter):
 
 
 class _Parser(argparse.ArgumentParser):
-    """Errors in one line, like every other bad input (SPEC section 13)."""
+    """Errors in one line, like every other bad input (docs/reference/errors.md)."""
 
     def error(self, message: str):
         print(f"error: <arguments>: {self.prog}: {message} (see {self.prog} --help)",
@@ -104,28 +104,36 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="as JSON (one object per setting)")
     c.set_defaults(func="settings_cmd:cmd_settings")
 
+    c = command("schema", "print the JSON Schema of a scene file or a sweep config "
+                "(for editors; docs/reference/scenes.md)")
+    c.add_argument("kind", choices=["scene", "sweep"])
+    c.set_defaults(func="schema_cmd:cmd_schema")
+
     c = command("precompute", "C, clusters and Shrinking of one scene")
     c.add_argument("scene", type=_path, help="scene TOML file")
     _add_set(c)
-    c.add_argument("--json", metavar="OUT.json", type=_path, help="write SPEC section 12a's keys")
+    c.add_argument("--json", metavar="OUT.json", type=_path, help="write the one-scene JSON's keys")
     c.set_defaults(func="precompute_cmd:cmd_precompute")
 
-    c = command("evaluate", "evaluate scenes in every mode, as one batch (SPEC 12a)")
+    c = command("evaluate", "evaluate scenes in every mode, as one batch "
+                "(docs/reference/outputs.md)")
     c.add_argument("scene", nargs="+", type=_path,
                    help="scene TOML files, or folders of them (all evaluated as one batch)")
     _add_set(c)
     c.add_argument("--modes", nargs="+", default=list(PAPER_MODES), choices=list(MODES),
-                   help="modes to evaluate (optimized runs SPEC 17's search first)")
+                   help="modes to evaluate (optimized runs the optimized mode's search first)")
     c.add_argument("--json", metavar="OUT.jsonl", type=_path,
-                   help="write SPEC section 12a's object, one line per scene (JSON Lines)")
+                   help="write the one-scene JSON object (docs/reference/outputs.md), one line per "
+                   "scene (JSON Lines)")
     c.set_defaults(func="evaluate_cmd:cmd_evaluate")
 
     c = command("optimize", "search a scene's best task-space sizes: the optimized mode "
-                "(SPEC 17)")
+                "(docs/reference/model.md)")
     c.add_argument("scene", type=_path, help="scene TOML file")
     _add_set(c)
     c.add_argument("--json", metavar="OUT.json", type=_path,
-                   help="write SPEC section 12a's object with modes.optimized and an "
+                   help="write the one-scene JSON object (docs/reference/outputs.md) with "
+                   "modes.optimized and an "
                    "optimize block")
     c.set_defaults(func="optimize_cmd:cmd_optimize")
 

@@ -1,4 +1,4 @@
-"""Where a sweep runs: a Dask distributed cluster (SPEC section 12).
+"""Where a sweep runs: a Dask distributed cluster (reference/outputs: sweeps).
 
 Two kinds of worker, told apart by Dask resources:
 

@@ -1,5 +1,5 @@
-"""Sweep configurations (SPEC section 12): a scene source, the modes, and axes
-over any setting of SPEC section 16, validated in full before any work starts.
+"""Sweep configurations (reference/outputs: sweeps): a scene source, the modes, and axes
+over any setting of the settings (reference/settings), validated in full before any work starts.
 
     name = "speed"
     modes = ["baseline", "shrinking", "shacc"]   # optional, default all three
@@ -248,7 +248,7 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         scenes = cfg.scenes()
         from geometry_precompute.bodies import check_bodies_apart
 
-        for scene in scenes:  # the rest of SPEC section 13: here, not in a worker mid-sweep
+        for scene in scenes:  # the rest of reference/errors: here, not mid-sweep
             check_bodies_apart(scene)
         for k, p in enumerate(points):
             grids = {tuple(s.settings(DEFAULTS, p)["start_grid"]): s.source for s in scenes}

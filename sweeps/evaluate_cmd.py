@@ -1,8 +1,8 @@
 """``shacc evaluate SCENE.toml [MORE.toml | FOLDER ...]``: scenes end to end in one
-batch (one compilation), a readable summary and, with ``--json``, SPEC section
-12a's object per scene.
+batch (one compilation), a readable summary and, with ``--json``, the
+one-scene JSON object (reference/outputs) per scene.
 
-``--json OUT`` writes JSON Lines: one SPEC 12a object per line, one line per scene in
+``--json OUT`` writes JSON Lines: a one-scene JSON object (reference/outputs) per line, in
 the order evaluated. For one scene that file is also a plain JSON document.
 """
 

@@ -22,6 +22,6 @@ def parse_sets(pairs: Sequence[str]) -> dict:
 
 
 def load_and_precompute(path: str, sets: Sequence[str]) -> PrecomputeResult:
-    """One scene file with ``--set`` overrides (SPEC section 16's precedence)."""
+    """One scene file with ``--set`` overrides (the settings' precedence)."""
     scene = load_scene(path)
     return precompute(scene, scene.settings(overrides=parse_sets(sets)))

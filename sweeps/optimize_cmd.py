@@ -1,10 +1,10 @@
-"""``shacc optimize SCENE.toml [--json OUT]``: SPEC section 17's search for one scene.
+"""``shacc optimize SCENE.toml [--json OUT]``: the optimized mode's search for one scene.
 
 Prints, per task, the parameters of Shrinking and of the search (with their bounds),
 the success rates of every mode on the scene's usual start grid (held out: the search
 never saw those starts), the search's objective on its own starts, and its
-convergence (the best objective after each generation). ``--json`` writes SPEC
-section 12a's object with ``modes.optimized`` and an ``optimize`` block.
+convergence (the best objective after each generation). ``--json`` writes the
+one-scene JSON object (reference/outputs) with ``modes.optimized`` and an ``optimize`` block.
 """
 
 from __future__ import annotations

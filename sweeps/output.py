@@ -1,4 +1,4 @@
-"""Writing results: atomic files and the JSON of SPEC section 12a."""
+"""Writing results: atomic files and the JSON of the one-scene JSON (reference/outputs)."""
 
 from __future__ import annotations
 
@@ -157,7 +157,7 @@ def provenance(device: bool = False) -> dict[str, Any]:
 
 
 def precompute_json(r: PrecomputeResult) -> dict[str, Any]:
-    """The precompute keys of SPEC section 12a."""
+    """The precompute keys of the one-scene JSON (reference/outputs)."""
     ids = r.task_ids
     return {
         "scene": r.scene.name,

@@ -1,5 +1,5 @@
 """Glue between the halves: scenes -> precompute -> bake -> jitted evaluation ->
-NumPy results and SPEC section 12a's JSON. Reproduce and sweeps reuse it."""
+NumPy results and the one-scene JSON's JSON. Reproduce and sweeps reuse it."""
 
 from __future__ import annotations
 
@@ -27,6 +27,10 @@ from .output import precompute_json, provenance
 
 @dataclass(frozen=True)
 class Evaluated:
+    """An evaluated batch (:func:`evaluate_results`): the precomputed scenes, their
+    bake, the evaluation as NumPy arrays (modes in the order of ``modes``), the
+    timings (s), the optimized mode's search where it ran, and the provenance."""
+
     results: list[PrecomputeResult]
     baked: BakedScenes
     evaluation: Evaluation  # NumPy arrays
@@ -64,7 +68,7 @@ def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
     """Every mode of ``modes`` (shacc_jax.ALL_MODES) for a bake, as NumPy arrays in that
     order, and the search when ``optimized`` is among them: the search runs on its own
     starts, then its spaces replace the optimised ones and the scene's usual starts are
-    evaluated under shacc's rules (SPEC section 17). ``found``: a search already run for
+    evaluated under shacc's rules (reference/model). ``found``: a search already run for
     these scenes (its parameters are used, no search runs)."""
     compile_cache.enable()  # from Python too, not only from the command line
     modes = tuple(modes)
@@ -115,6 +119,24 @@ def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str],
 
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
                      max_tasks: int | None = None, found: Search | None = None) -> Evaluated:
+    """Bake and evaluate precomputed scenes in one batch: what ``shacc evaluate`` does.
+
+    :param results: S precomputed scenes (``geometry_precompute.precompute``).
+    :param modes: any of baseline, shrinking, shacc, optimized (which runs its search
+        first), in the order of the result's mode axis.
+    :param max_tasks: pad the task axis to at least this.
+    :param found: a search already run for these scenes (the optimized mode reuses it).
+    :returns: an :class:`Evaluated` holding NumPy arrays: ``evaluation.rollouts``
+        fields of shape (S, M, N, T), ``evaluation.metrics`` of shape (S, M), the bake
+        (``baked.starts`` (S, N, 7)), the timings and the provenance. Memory-bound
+        batches are split into pieces and joined, with the same results.
+
+    Example::
+
+        ev = evaluate_results([precompute(load_scene(p)) for p in shipped_scene_paths()])
+        ev.evaluation.metrics.u_scene[:, ev.modes.index("shacc")]   # (S,)
+        scene_json(ev, 0)["modes"]["baseline"]["outcome"]          # per start and task
+    """
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
@@ -129,7 +151,7 @@ def _none_if_nan(x: float):
 
 
 def scene_json(ev: Evaluated, s: int) -> dict:
-    """SPEC section 12a's object for scene ``s`` of an evaluated batch."""
+    """the one-scene JSON object (reference/outputs) for scene ``s`` of an evaluated batch."""
     r = ev.results[s]
     ids = r.task_ids
     T = len(ids)
@@ -201,7 +223,7 @@ def optimized_params(ev: Evaluated, s: int) -> dict[str, dict[str, float]]:
 
 
 def optimize_json(ev: Evaluated, s: int) -> dict:
-    """The ``optimize`` block of SPEC section 12a's object (section 17): the parameters
+    """The ``optimize`` block of the one-scene JSON (reference/outputs, model): the parameters
     chosen, and success on the search's starts, on the validation starts and on the
     held-out grid (where those modes were evaluated) side by side, and which candidate
     won."""

@@ -1,5 +1,5 @@
 """``shacc precompute SCENE.toml``: C, clusters and Shrinking of one scene, printed,
-and with ``--json`` SPEC section 12a's precompute keys."""
+and with ``--json`` the one-scene JSON's precompute keys."""
 
 from __future__ import annotations
 

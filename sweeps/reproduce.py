@@ -1,11 +1,11 @@
 """``shacc reproduce``: the paper's simulation experiment (sections VI-VII) in one
 command: the shipped manual set and a random set, in the paper's three modes and the
-``optimized`` mode (SPEC section 17), with Fig. 6 as numbers, tables and plots, Fig. 7's
+``optimized`` mode (reference/model), with Fig. 6 as numbers, tables and plots, Fig. 7's
 success fields, and how much success Shrinking leaves on the table: per category, the
 mean over scenes of u_scene(optimized) - u_scene(shrinking) on the held-out grid, with
 its bootstrap CI.
 
-Categories (SPEC section 10 and the issue): ``uncluttered`` (manual, C_init = 0),
+Categories (reference/statistics, experiments): ``uncluttered`` (manual, C_init = 0),
 ``cluttered`` (manual, C_init > 0), ``uniform``, ``gaussian`` (random sets),
 ``all``, and ``cinit_pos`` (every scene with C_init > 0). Per category and mode
 the means of u_scene, delta_R (the scene means over successes; scenes without a
@@ -357,8 +357,9 @@ def discussion(summary: dict) -> str:
         "(its twelve manual scenes and twenty random ones are shown only as pictures; ours "
         "follow the same patterns with our own coordinates, and the random set comes from "
         "our seeded generator, half mugs with side grasps and half cups with handle grasps). "
-        "The Automaton here is SPEC section 9's greedy step rule exactly, with starts on a "
-        "grid 0.45 m in front of the scene and uniformly random start orientations; the "
+        "The Automaton here follows the greedy step rule of docs/reference/model.md "
+        "exactly, with starts on a grid 0.45 m in front of the scene and uniformly random "
+        "start orientations; the "
         "paper's Automaton moves towards the closest valid pose of its task, and its start "
         "orientations are only called arbitrary. A uniformly random rotation is on average "
         "pi/2 + 2/pi = 2.21 rad from any fixed one, which is what our baseline delta_R "
@@ -400,7 +401,7 @@ def losses_to_shrinking(scenes: list[dict]) -> dict:
 
 
 def optimized_sentence(cats: dict) -> str:
-    """How much success Shrinking leaves on the table (SPEC section 17)."""
+    """How much success Shrinking leaves on the table (reference/model: the optimized mode)."""
     def pp(e) -> str:
         if e is None or e.get("mean") is None:
             return "n/a"
@@ -410,7 +411,8 @@ def optimized_sentence(cats: dict) -> str:
 
     pos, every = cats["cinit_pos"], cats["all"]
     return (
-        "How far is Shrinking from the best sizes? The search (SPEC section 17) looks for "
+        "How far is Shrinking from the best sizes? The search (docs/reference/model.md) "
+        "looks for "
         "the sizes of the same spaces, within the same bounds, that make the most rollouts "
         "succeed on its own starts; scored on the held-out start grid, the optimized spaces "
         f"change success against Shrinking's by {pp(pos['optimized_gain'])} percentage "

@@ -1,4 +1,4 @@
-"""The sweep runner (SPEC section 12): a streaming pipeline on Dask distributed.
+"""The sweep runner (reference/outputs: sweeps): a streaming pipeline on Dask distributed.
 
 The chunk plan (``plan``) comes from the config alone. For every chunk not yet
 written, the client submits its precompute tasks (``workers.precompute_batch``, on
@@ -128,7 +128,18 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
     ``workers``: precompute processes of the local cluster (default: one per core);
     ``scheduler``: an existing Dask cluster's address (default: the config's
     ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
-    that may be precomputed ahead of the evaluation."""
+    that may be precomputed ahead of the evaluation. Returns a summary (points, scenes,
+    rollouts, timings). The dataset's tables and columns: docs/reference/outputs.md.
+
+    From a script, call it under ``if __name__ == "__main__":`` (the local cluster
+    starts worker processes that import the main module); notebooks need nothing.
+
+    Example::
+
+        from sweeps.config import load_config
+        run_sweep(load_config("sweeps/configs/laptop.toml"), Path("out/laptop"))
+        scenes = pandas.read_parquet("out/laptop/scenes")
+    """
     # Everything that can refuse the sweep is checked before a file or folder is made.
     scheduler = scheduler or cfg.scheduler
     if scheduler is not None:

@@ -1,4 +1,4 @@
-"""``shacc settings``: every setting of SPEC section 16 with its default, type, valid
+"""``shacc settings``: every setting (reference/settings) with its default, type, valid
 range, stage and meaning, read from the one place they are defined
 (``geometry_precompute.settings``)."""
 

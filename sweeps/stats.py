@@ -1,4 +1,4 @@
-"""Statistics of SPEC section 10, every one resampling scenes, through scipy.
+"""Statistics (reference/statistics), every one resampling scenes, through scipy.
 
 The unit of resampling is the scene, everywhere. Rollouts of one scene are not
 independent, and a sweep evaluates the same scene once per point, so:
