@@ -38,7 +38,7 @@ class Preset(NamedTuple):
 
 PRESETS = {
     "compact": Preset(0.30, 0.10, "0.6 m x 0.6 m table, sigma 0.10 m (the first reading)"),
-    "paper": Preset(0.65, 0.18, "1.3 m x 1.3 m table, sigma 0.18 m: mean C_init 0.096 (uniform) "
+    "paper": Preset(0.65, 0.18, "1.3 m x 1.3 m table, sigma 0.18 m: mean C_init 0.095 (uniform) "
                     "and 0.309 (gaussian) over 1 000 scenes each"),
 }
 # The most objects the generator places: 30 fill the 0.6 m table to about half of the
