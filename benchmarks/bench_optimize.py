@@ -1,4 +1,4 @@
-"""Time of the optimized mode's search (reference/model: the optimized mode) and CPU/GPU agreement.
+"""Time of the optimized mode's search (reference/model) and CPU/GPU agreement.
 
 Two steps, so the accelerator machine needs only JAX, evosax and ``shacc_jax``:
 

@@ -1,4 +1,4 @@
-"""Rollout throughput of the jitted evaluation (reference/index: the performance targets).
+"""Rollout throughput of the jitted evaluation (reference/index).
 
 Two steps, so the accelerator machine needs only JAX and ``shacc_jax``:
 

@@ -1,4 +1,4 @@
-"""The bake: precomputed scenes as fixed-shape NumPy arrays (reference/index: the layout).
+"""The bake: precomputed scenes as fixed-shape NumPy arrays (reference/index).
 
 This is the only bridge between the CPU half and the JAX half: ``shacc_jax``
 reads these arrays by name and nothing else. S scenes are padded to T tasks

@@ -1,4 +1,4 @@
-"""Clusters (reference/model: clusters): connected components of the graph linking tasks
+"""Clusters (reference/model): connected components of the graph linking tasks
 whose initial position spaces intersect (touching does not count; the pairs come
 from :meth:`~geometry_precompute.intersect.SpaceSet.intersecting_pairs`).
 

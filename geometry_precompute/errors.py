@@ -1,6 +1,6 @@
 """The two kinds of fault a user can cause or meet, each one line.
 
-- :class:`InputError`: bad input (reference/errors: bad input). Every loader and public function
+- :class:`InputError`: bad input (reference/errors). Every loader and public function
   raises it for input it rejects; the message names the source (a file, or
   "<settings>" / "<arguments>" for values that came from elsewhere), the field and
   the rule. The command line prints it and exits with status 2.

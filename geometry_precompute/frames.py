@@ -1,4 +1,4 @@
-"""Frames and quaternions on the CPU side (reference/conventions: the conventions), in float64.
+"""Frames and quaternions on the CPU side (reference/conventions), in float64.
 
 Quaternions are (w, x, y, z). scipy's Rotation uses (x, y, z, w): conversions from
 matrices go through :func:`quat_from_matrix`; ``shapes.rotation_matrix`` goes back.

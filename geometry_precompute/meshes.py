@@ -1,4 +1,4 @@
-"""Triangle meshes of the shapes (reference/model: the position spaces), built with manifold3d.
+"""Triangle meshes of the shapes (reference/model), built with manifold3d.
 
 Round cross-sections are regular polygons of ``sections`` sides whose radius
 is scaled so that the polygon's *area* equals the circle's: a polygon

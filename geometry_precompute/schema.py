@@ -38,7 +38,7 @@ INVALID = -1  # the rollout's intended task is a padded (masked) task
 KINDS = ("cylinder", "disk", "cone", "box")
 CYLINDER, DISK, CONE, BOX = range(4)
 KIND_CODES = {name: i for i, name in enumerate(KINDS)}
-# Orientation-space kinds (reference/model: clutteredness).
+# Orientation-space kinds (reference/scenes, templates).
 ORIENT_KINDS = ("fixed", "point_to_axis")
 FIXED, POINT_TO_AXIS = range(2)
 

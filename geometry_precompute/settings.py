@@ -347,7 +347,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
 
     ``side_grasp.radius_init = 0.18`` written bare is read by TOML as the table
     ``{"side_grasp": {"radius_init": 0.18}}``; quoted, as the key
-    ``"side_grasp.radius_init"``. Both mean one setting (reference/settings: the settings), so every
+    ``"side_grasp.radius_init"``. Both mean one setting (reference/settings), so every
     reader of a settings table (scenes, sweep axes, points and fixed settings) calls
     this first. Both forms of one name in one table are an error, not a silent pick.
     Names are not checked here: the caller's validation sees the full dotted name, so
@@ -375,7 +375,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
 
 
 class Settings(Mapping[str, Any]):
-    """An immutable, validated set of every setting of the settings (reference/settings)."""
+    """An immutable, validated set of every setting (reference/settings)."""
 
     __slots__ = ("_values",)
 

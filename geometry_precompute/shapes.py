@@ -1,4 +1,4 @@
-"""The four position-space shapes of the position spaces (reference/model), on the CPU.
+"""The four position-space shapes (reference/model), on the CPU.
 
 A :class:`Shape` is a kind, a pose (centre c and quaternion q, mapping the
 local frame to the world) and three dimensions whose meaning depends on the
@@ -39,7 +39,7 @@ class Shape:
         return rotation_matrix(self.quat)
 
     def volume(self) -> float:
-        """Exact volume (reference/model: the position spaces)."""
+        """Exact volume (reference/model)."""
         a, b, c = self.dims
         if self.kind in ("cylinder", "disk"):
             return float(np.pi * a * a * b)

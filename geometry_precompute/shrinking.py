@@ -1,4 +1,4 @@
-"""Shrinking (reference/model: Shrinking), with the answers of its pseudocode.
+"""Shrinking (reference/model), with the answers of its pseudocode.
 
 All spaces that intersect another (section 6's test) and can still shrink lose
 the same fraction ``sigma`` of their own parameter range at once, until no space

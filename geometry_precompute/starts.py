@@ -1,4 +1,4 @@
-"""Start poses of the Automaton (reference/model: the Automaton).
+"""Start poses of the Automaton (reference/model).
 
 A grid of n_y x n_z points on the vertical plane x = min(object x) - offset,
 y in [y_c - w, y_c + w] (y_c the mean object y), z in the height band, ordered

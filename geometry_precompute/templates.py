@@ -63,7 +63,7 @@ class TaskSpace:
 
 
 def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """The cup handle's grasp point g and direction u (reference/scenes: the scene format)."""
+    """The cup handle's grasp point g and direction u (reference/scenes)."""
     u = np.array([np.cos(obj.yaw), np.sin(obj.yaw), 0.0])
     g = np.asarray(obj.position) + (obj.radius + offset) * u + np.array([0, 0, obj.height / 2])
     return g, u

@@ -1,4 +1,4 @@
-"""An independent estimate of C from the SDFs (reference/model: clutteredness).
+"""An independent estimate of C from the SDFs (reference/model).
 
 Points are drawn uniformly inside each space i (exact inverse-CDF sampling per
 kind); the fraction f_ij of them inside space j estimates V(p_i ∩ p_j) / V_i.

@@ -1,5 +1,5 @@
 """Exact signed distances, closest points and ray intervals of the four shapes
-(reference/model: the position spaces), for one point and one shape; batching is vmap's job.
+(reference/model), for one point and one shape; batching is vmap's job.
 
 Kinds: 0 cylinder, 1 disk (a cylinder to the maths), 2 cone, 3 box, with the
 dims of ``geometry_precompute.shapes``. The per-kind formulas are all

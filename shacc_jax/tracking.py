@@ -1,4 +1,4 @@
-"""The shacc mode's orientation tracking over lanes (reference/model: the reference).
+"""The shacc mode's orientation tracking over lanes (reference/model).
 
 Along a rollout's path, R turns towards the meta target R_M by at most
 omega_max dt per sample while the EE is in a meta region, from the first sample

@@ -155,7 +155,7 @@ class Rollouts(NamedTuple):
 
 
 class SceneMetrics(NamedTuple):
-    """Per scene and mode, shape (S, M, ...) (reference/statistics: metrics and statistics)."""
+    """Per scene and mode, shape (S, M, ...) (reference/statistics)."""
 
     u_scene: Float[Array, "S M"]
     delta_R_mean: Float[Array, "S M"]  # NaN where a mode has no success

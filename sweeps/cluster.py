@@ -1,4 +1,4 @@
-"""Where a sweep runs: a Dask distributed cluster (reference/outputs: sweeps).
+"""Where a sweep runs: a Dask distributed cluster (reference/outputs).
 
 Two kinds of worker, told apart by Dask resources:
 

@@ -1,4 +1,4 @@
-"""Sweep configurations (reference/outputs: sweeps): a scene source, the modes, and axes
+"""Sweep configurations (reference/outputs): a scene source, the modes, and axes
 over any setting of the settings (reference/settings), validated in full before any work starts.
 
     name = "speed"

@@ -1,4 +1,4 @@
-"""Writing results: atomic files and the JSON of the one-scene JSON (reference/outputs)."""
+"""Writing results: atomic files and the one-scene JSON (reference/outputs)."""
 
 from __future__ import annotations
 

@@ -401,7 +401,7 @@ def losses_to_shrinking(scenes: list[dict]) -> dict:
 
 
 def optimized_sentence(cats: dict) -> str:
-    """How much success Shrinking leaves on the table (reference/model: the optimized mode)."""
+    """How much success Shrinking leaves on the table (reference/model)."""
     def pp(e) -> str:
         if e is None or e.get("mean") is None:
             return "n/a"

@@ -1,4 +1,4 @@
-"""The sweep runner (reference/outputs: sweeps): a streaming pipeline on Dask distributed.
+"""The sweep runner (reference/outputs): a streaming pipeline on Dask distributed.
 
 The chunk plan (``plan``) comes from the config alone. For every chunk not yet
 written, the client submits its precompute tasks (``workers.precompute_batch``, on

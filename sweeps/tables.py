@@ -1,4 +1,4 @@
-"""A sweep's results as a typed, self-describing Parquet dataset (reference/outputs: sweeps).
+"""A sweep's results as a typed, self-describing Parquet dataset (reference/outputs).
 
 Four tables, each a folder of one part file per chunk, ``part-000123.parquet``,
 written atomically (a temporary name starting with ``.`` that every reader skips, then
