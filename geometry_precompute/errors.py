@@ -39,7 +39,10 @@ def one_line(text: str, limit: int = MAX_LINE) -> str:
 
 
 class InputError(ValueError):
-    """Bad input: ``source: field: rule``."""
+    """Bad input: ``source: field: rule``, printed as one line. ``source`` names the
+    file (or ``<arguments>``, ``<--set>``), ``field`` the field (``objects[a].radius``)
+    and ``rule`` what was expected and what was found. Raised by every loader and
+    public function before anything is written; a ``ValueError``."""
 
     def __init__(self, source: str, field: str, rule: str):
         self.source = one_line(source, 200)

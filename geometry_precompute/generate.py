@@ -56,9 +56,24 @@ GENERATOR_VERSION = 1
 def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks: int = 10,
                  preset: str = "compact", *, gap: float = 0.01, max_attempts: int = 2000,
                  name: str | None = None) -> Scene:
-    """A seeded random scene (module docstring): ``kind`` "uniform" or "gaussian",
-    between ``min_tasks`` and ``max_tasks`` tasks, the table area and spread of
-    ``preset`` (:data:`PRESETS`). The same arguments give the same scene."""
+    """A seeded random scene (module docstring; docs/reference/experiments.md).
+
+    :param seed: the generator's seed (``numpy.random.default_rng``).
+    :param kind: "uniform" (positions uniform over the table area) or "gaussian"
+        (around its centre).
+    :param min_tasks, max_tasks: the number of objects, one task each, is uniform in
+        this range (1 to 30).
+    :param preset: the table area and gaussian spread, a name of :data:`PRESETS`:
+        "compact" (0.6 m table, sigma 0.10 m) or "paper" (1.3 m, 0.18 m: the paper's
+        C_init distribution).
+    :param gap: the smallest distance between two bodies, m.
+    :returns: a :class:`Scene` named ``random-[PRESET-]KIND-SEED``; the same arguments
+        give the same scene on every machine.
+
+    Example::
+
+        scenes = [random_scene(seed, "gaussian", 5, 10, "paper") for seed in range(100)]
+    """
     if preset not in PRESETS:
         raise ValueError(f"generator preset must be one of {', '.join(PRESETS)}, got "
                          f"{preset!r}")

@@ -34,6 +34,22 @@ def _sample_local(kind, dims, u):
 
 @partial(jax.jit, static_argnames=("n_samples",))
 def clutteredness_mc(spaces: Spaces, mask, key, n_samples: int = 1 << 16):
+    """Monte Carlo estimate of one scene's clutteredness C (module docstring), the
+    check of the mesh booleans.
+
+    :param spaces: the scene's T spaces (:class:`~shacc_jax.types.Spaces`: kind (T,),
+        center (T, 3) m, quat (T, 4) w first, dims (T, 3) m or rad).
+    :param mask: (T,) bool, the real tasks (padding False).
+    :param key: a JAX PRNG key.
+    :param n_samples: points drawn per space.
+    :returns: C as a scalar array (dimensionless).
+
+    Example::
+
+        g = shacc_jax.Geometry.from_bake(bake(results))
+        spaces = shacc_jax.Spaces(g.kind[0], g.center_init[0], g.quat_init[0], g.dims_init[0])
+        shacc_jax.clutteredness_mc(spaces, g.task_mask[0], jax.random.key(0))  # ~ C_init
+    """
     T = mask.shape[0]
     keys = jax.random.split(key, T)
     prepared = shapes.prepare_all(*spaces)

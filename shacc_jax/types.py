@@ -91,7 +91,11 @@ def _pytree(name: str, fields, methods, doc: str):
 
 
 Geometry = _pytree("Geometry", schema.GEOMETRY, _GeometryMethods,
-                   "A batch's baked arrays (schema.GEOMETRY), leading axis S scenes.")
+                   "A batch's baked arrays, leading axis S scenes: the spaces before and "
+                   "after Shrinking (kind, center m, quat w first, dims m or rad), the "
+                   "task mask, clusters, orientation spaces, objects and the start poses "
+                   "(S, N, 7). geometry_precompute/schema.py (GEOMETRY) lists every field "
+                   "with its shape; Geometry.from_bake(baked) builds it.")
 Params = _pytree("Params", schema.PARAMS, _ParamsMethods,
                  "Every rollout setting (schema.PARAMS): leaves of shape (S,), or (P, S) "
                  "for P sweep points over one geometry.")
@@ -142,7 +146,15 @@ class Search(NamedTuple):
 
 
 class Rollouts(NamedTuple):
-    """Per rollout, shape (S, M, N, T): scenes, modes, starts, intended tasks."""
+    """Per rollout, shape (S, M, N, T): scenes, modes, starts, intended tasks.
+
+    ``outcome``: codes into ``shacc_jax.OUTCOMES`` (success, wrong, ambiguous,
+    timeout, collision); ``activated``: the task index that activated, -1 for none;
+    ``step``: the step of activation (``max_steps`` on a timeout); ``point``: where it
+    ended (m); ``path_length`` (m); ``meta_steps``: steps spent in a meta-skill region;
+    ``delta_R`` (rad): the orientation jump at activation, NaN unless success;
+    ``orientation``: the end orientation, a unit quaternion (w, x, y, z). Padded tasks
+    (``task_mask`` False) hold no rollout: read ``[..., :T_scene]``."""
 
     outcome: Int[Array, "S M N T"]
     activated: Int[Array, "S M N T"]
@@ -155,7 +167,10 @@ class Rollouts(NamedTuple):
 
 
 class SceneMetrics(NamedTuple):
-    """Per scene and mode, shape (S, M, ...) (reference/statistics)."""
+    """Per scene and mode, shape (S, M, ...) (reference/statistics): ``u_scene``, the
+    fraction of successful rollouts; ``delta_R_mean`` (rad), NaN where a mode has no
+    success; ``outcome_counts`` (S, M, 5) in the order of ``shacc_jax.OUTCOMES``;
+    ``n_rollouts``, the real (unpadded) rollouts."""
 
     u_scene: Float[Array, "S M"]
     delta_R_mean: Float[Array, "S M"]  # NaN where a mode has no success
@@ -164,5 +179,9 @@ class SceneMetrics(NamedTuple):
 
 
 class Evaluation(NamedTuple):
+    """What :func:`shacc_jax.evaluate` returns: ``rollouts`` (every rollout, (S, M, N,
+    T)) and ``metrics`` (per scene and mode, (S, M)); a leading points axis P when the
+    Params had one."""
+
     rollouts: Rollouts
     metrics: SceneMetrics

@@ -151,7 +151,16 @@ def _none_if_nan(x: float):
 
 
 def scene_json(ev: Evaluated, s: int) -> dict:
-    """the one-scene JSON object (reference/outputs) for scene ``s`` of an evaluated batch."""
+    """The one-scene JSON object (reference/outputs) of scene ``s`` of an evaluated
+    batch, as ``shacc evaluate --json`` writes it: task ids, C, clusters, Shrinking's
+    parameters, d and h, the starts, per mode the outcome, activated task and delta_R
+    of every (start, task), per task its rates, the settings and the provenance.
+
+    Example::
+
+        ev = evaluate_results(results)
+        json.dumps(scene_json(ev, 0))
+    """
     r = ev.results[s]
     ids = r.task_ids
     T = len(ids)

@@ -97,3 +97,31 @@ def test_the_readme_python_workflow_runs(tmp_path):
                          env={**__import__("os").environ, "JAX_PLATFORMS": "cpu"})
     assert run.returncode == 0, run.stderr[-3000:]
     assert "C_init" in run.stdout and "'ci'" in run.stdout
+
+
+def _api_members() -> list[str]:
+    text = (ROOT / "docs/reference/api.md").read_text()
+    blocks = dict(re.findall(r"^::: ([\w.]+)\n    options:\n      members:\n((?:        - \w+\n)+)",
+                             text, re.M))
+    names = [n for n in re.findall(r"^::: ([\w.]+)", text, re.M) if n not in blocks]
+    names += [f"{mod}.{m}" for mod, block in blocks.items() for m in re.findall(r"- (\w+)", block)]
+    return names
+
+
+def test_every_documented_entry_point_says_what_it_takes_and_shows_an_example():
+    """Every function and class named in api.md has a real docstring, and every
+    function there an example."""
+    import importlib
+    import inspect
+
+    thin = []
+    for name in _api_members():
+        mod, _, attr = name.rpartition(".")
+        try:
+            obj = getattr(importlib.import_module(mod), attr)
+        except (ImportError, AttributeError):
+            continue  # a module: documented by its own docstring (mkdocstrings renders it)
+        doc = inspect.getdoc(obj) or ""
+        if len(doc) < 100 or (inspect.isfunction(obj) and "Example" not in doc):
+            thin.append(name)
+    assert not thin, f"docstrings too thin or without an example: {thin}"
