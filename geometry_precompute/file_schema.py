@@ -34,7 +34,6 @@ LOADER_ONLY = {
         "yaw and yaw_deg (half_angle and half_angle_deg) are not both given",
         "objects do not interpenetrate (checked when the geometry is built)",
         "start_grid: n_y * n_z <= 16 777 216; start_z_range: low <= high",
-        "a setting that is an integer may not be written as a float with a fraction",
         "names, ids and the description are printable text (a pattern approximates "
         "Unicode's rule)",
     ],

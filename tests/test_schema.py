@@ -97,6 +97,7 @@ BAD_SCENES = [
     (("tasks", 0, "fixed"), {"height": 0.1}, None),
     (("tasks", 1, "id"), "t", "task ids"),
     (("settings", "dt"), 0.0, None),
+    (("settings", "max_steps"), 600.5, None),
     (("settings", "dt"), "fast", None),
     (("settings", "warp"), 9, None),
     (("settings", "ambiguity"), "random", None),
