@@ -235,18 +235,16 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
         if key != name and name in bounds_raw:
             raise InputError(src, f"{where}bounds.{key}", f"give {name} (rad) or {key}, "
                              "not both")
-        if key != name:
-            lo, hi = _vector(value, 2, src, f"{where}bounds.{key}", positive=False)
-            if not (0 < lo < 90 and 0 < hi < 90):
-                raise InputError(src, f"{where}bounds.{key}", f"must be two angles in "
-                                 f"(0, 90) degrees, got {shown(value)}")
-            lo, hi = math.radians(lo), math.radians(hi)
-        elif name == "half_angle":
+        if name == "half_angle":  # in radians, or in degrees as half_angle_deg
             lo, hi = _vector(value, 2, src, f"{where}bounds.{key}")
+            if key != name:
+                lo, hi = math.radians(lo), math.radians(hi)
             if not (0 < lo < math.pi / 2 and 0 < hi < math.pi / 2):
+                hint = "" if key != name else \
+                    f" (degrees? write half_angle_deg = {shown(value)})"
                 raise InputError(src, f"{where}bounds.{key}", f"must be two angles in "
-                                 f"(0, pi/2) rad, got {shown(value)} (degrees? write "
-                                 f"half_angle_deg = {shown(value)})")
+                                 f"(0, {'90) degrees' if key != name else 'pi/2) rad'}, got "
+                                 f"{shown(value)}{hint}")
         else:
             lo, hi = _vector(value, 2, src, f"{where}bounds.{name}", positive=True)
         if lo > hi:

@@ -28,22 +28,34 @@ METRICS = ("success", "delta_R_mean")
 REGRESSION = 3  # the exit status of a --fail-if that is met
 
 
-def _load_json_lines(path: Path) -> tuple[list[dict], list[dict]]:
-    """(scene rows, task rows) of an ``evaluate --json`` file."""
+def read_evaluate_json(path: Path) -> list[dict]:
+    """The scene objects of an ``evaluate --json`` file (JSON Lines, one per scene), each
+    checked to carry ``scene`` and ``modes``."""
     text = read_bytes_limited(path, "an evaluate --json file", 1 << 30).decode("utf-8",
                                                                               "replace")
-    scenes, tasks = [], []
+    objects = []
     for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         try:
             d = json.loads(line)
-            name = d["scene"]
-            modes = d["modes"]
+            if not isinstance(d["scene"], str) or not isinstance(d["modes"], dict):
+                raise TypeError
         except (ValueError, KeyError, TypeError):
             raise InputError(path, f"<line {n}>", "not an object written by `shacc evaluate "
                              "--json`") from None
-        for mode, m in modes.items():
+        objects.append(d)
+    if not objects:
+        raise InputError(path, "<file>", "holds no scene")
+    return objects
+
+
+def json_rows(objects: list[dict]) -> tuple[list[dict], list[dict]]:
+    """(scene rows, task rows) of the objects of an ``evaluate --json`` file."""
+    scenes, tasks = [], []
+    for d in objects:
+        name = d["scene"]
+        for mode, m in d["modes"].items():
             scenes.append({"key": name, "point": 0, "mode": mode,
                            "success": m.get("success_rate"),
                            "delta_R_mean": m.get("delta_R_mean")})
@@ -51,18 +63,23 @@ def _load_json_lines(path: Path) -> tuple[list[dict], list[dict]]:
             for mode, m in t["modes"].items():
                 tasks.append({"key": name, "point": 0, "task": t["id"], "mode": mode,
                               "success": m["success_rate"]})
-    if not scenes:
-        raise InputError(path, "<file>", "holds no scene")
     return scenes, tasks
+
+
+def read_scenes_table(path: Path):
+    """A sweep folder's scenes table as a DataFrame; anything else is an InputError."""
+    import pandas as pd
+
+    try:
+        return pd.read_parquet(path / "scenes")
+    except Exception as e:  # pyarrow's errors have no common base
+        raise InputError(path, "scenes/", f"not a sweep folder's scenes table ({e})") from None
 
 
 def _load_sweep(path: Path) -> tuple[list[dict], list[dict]]:
     import pandas as pd
 
-    try:
-        frame = pd.read_parquet(path / "scenes")
-    except Exception as e:
-        raise InputError(path, "scenes/", f"not a sweep folder's scenes table ({e})") from None
+    frame = read_scenes_table(path)
     modes = [c.split(".")[0] for c in frame.columns if c.endswith(".success")]
     scenes = []
     for r in frame.to_dict("records"):
@@ -89,7 +106,7 @@ def load(path: str | Path) -> tuple[list[dict], list[dict]]:
         if not (path / "scenes").is_dir():
             raise InputError(path, "<folder>", "not a sweep folder (no scenes/ table)")
         return _load_sweep(path)
-    return _load_json_lines(path)
+    return json_rows(read_evaluate_json(path))
 
 
 def _index(rows: list[dict], keys: tuple[str, ...]) -> dict:

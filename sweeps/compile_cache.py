@@ -29,6 +29,7 @@ is safe (``rm -r ~/.cache/shacc/compiled``).
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
@@ -90,22 +91,12 @@ def lean_locations() -> None:
     jax.config.update("jax_traceback_in_locations_limit", 0)
 
 
-_ENABLED: list[Path | None] = []
-
-
+@functools.cache
 def enable() -> Path | None:
     """Turn both caches on for this process (before the first compilation), and
     :func:`lean_locations`. Called by every command that evaluates and by the Python
     API's first evaluation (``sweeps.pipeline.evaluate_baked``), so notebooks and
     scripts keep their programs too; a second call does nothing."""
-    if _ENABLED:
-        return _ENABLED[0]
-    path = _enable()
-    _ENABLED.append(path)
-    return path
-
-
-def _enable() -> Path | None:
     lean_locations()
     path = cache_dir()
     if path is None:

@@ -130,11 +130,9 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     import pandas as pd
 
     from . import plots
+    from .compare import read_scenes_table
 
-    try:
-        scenes = pd.read_parquet(folder / "scenes")
-    except Exception as e:  # pyarrow's errors have no common base
-        raise InputError(folder, "scenes/", f"not a sweep folder's scenes table ({e})") from None
+    scenes = read_scenes_table(folder)
     config = {}
     try:
         config = json.loads((folder / "config.json").read_text())
@@ -152,23 +150,21 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     rows = []
     point_cols = [c for c in scenes.columns if c.startswith("set.")]
     first = scenes.drop_duplicates("point").set_index("point")
+    bars = {}  # the same success intervals, drawn below when there are few points
     for p, g in scenes.groupby("point", sort=True):
         label = ", ".join(f"{c[4:]}={plots._label(first.loc[p, c])}" for c in point_cols
                           if c[4:] in axes) or "-"
+        bars[f"point {p}"] = {"n_scenes": len(g)}
         for mode in modes:
-            rows.append([p, label, mode, _ci(group_means(g, ["point"], f"{mode}.success",
-                                                         n_boot)[0]),
+            success = group_means(g, ["point"], f"{mode}.success", n_boot)[0]
+            bars[f"point {p}"][mode] = {"success": success}
+            rows.append([p, label, mode, _ci(success),
                          _ci(group_means(g, ["point"], f"{mode}.delta_R_mean", n_boot)[0]),
                          len(g)])
     body += ["<h2>Success and delta_R per point and mode</h2>",
              _table(["point", "settings", "mode", "success [95 % CI]",
                      "delta_R (rad) [95 % CI]", "scenes"], rows, left=3, cls="modes")]
     if n_points <= 8:
-        bars = {}
-        for p, g in scenes.groupby("point", sort=True):
-            bars[f"point {p}"] = {"n_scenes": len(g), **{
-                m: {"success": group_means(g, ["point"], f"{m}.success", n_boot)[0]}
-                for m in modes}}
         body.append(_figure(plots.category_bars(bars, "success", modes, ylabel="mean success"),
                             "mean success per point and mode (95 % CI over scenes)"))
     body += ["<h2>Paired differences between modes</h2>",
@@ -244,10 +240,10 @@ def _part_provenance(folder: Path) -> list:
 def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     import pandas as pd
 
-    from .compare import _load_json_lines
+    from .compare import json_rows, read_evaluate_json
 
-    scenes_rows, task_rows = _load_json_lines(path)
-    lines = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    lines = read_evaluate_json(path)
+    scenes_rows, task_rows = json_rows(lines)
     frame = pd.DataFrame(scenes_rows)
     modes = list(dict.fromkeys(frame["mode"]))
     wide = frame.pivot_table(index="key", columns="mode", values=["success", "delta_R_mean"],
