@@ -17,13 +17,14 @@ demo: $(BIN)/shacc
 
 test: $(BIN)/shacc
 	$(BIN)/ruff check .
+	$(BIN)/mypy  # the three packages, as pyproject's [tool.mypy] says
 	$(BIN)/python -m pytest -q -n 2  # two processes: CI has two cores (11.7 against 14-17 min)
 
 bench: $(BIN)/shacc
 	$(BIN)/python benchmarks/bench_precompute.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache
 
 # Executed copies of the notebooks and their figures, in build/notebooks (git-ignored);
 # `make notebooks FIGURES=docs/notebooks` refreshes the README's pictures instead.

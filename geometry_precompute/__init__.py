@@ -13,6 +13,16 @@ import importlib
 import sys
 import types
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # what __getattr__ loads, for type checkers and editors
+    from .bake import BakedScenes, bake
+    from .errors import HostError, InputError
+    from .generate import random_scene
+    from .loading import load_scene, scene_from_dict
+    from .precompute import PrecomputeResult, precompute
+    from .scene import Scene, save_scene
+    from .settings import DEFAULTS, SPECS, Settings
 
 _WHERE = {
     "BakedScenes": "bake", "bake": "bake",
@@ -69,7 +79,15 @@ def shipped_scene_paths() -> list[Path]:
 
 def extra_scene_paths() -> list[Path]:
     """Scenes that ship beside the paper's twelve (``scenes/extra``), for cases those do
-    not cover: a cluster that mixes a top grasp with side grasps."""
+    not cover: a cluster that mixes a top grasp with side grasps. Paths in file-name
+    order.
+
+    Example::
+
+        >>> from geometry_precompute import extra_scene_paths, load_scene
+        >>> [load_scene(p).name for p in extra_scene_paths()][:1]
+        ['tray-between-mugs']
+    """
     from importlib.resources import files
 
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes", "extra").iterdir()

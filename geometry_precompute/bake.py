@@ -23,7 +23,8 @@ passed to JAX.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import field, make_dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -41,9 +42,59 @@ SEARCH_FIELDS = schema.names(schema.SEARCH)
 _PAD_DIMS = (0.01, 0.01, 0.01)
 
 
-class _Batch:
-    """What every bake offers beside its arrays (the dataclass below has one field
-    per schema field, and ``labels``)."""
+@dataclass(frozen=True)
+class BakedScenes:
+    """A bake: one NumPy array per schema field (``schema.GEOMETRY``, ``PARAMS``,
+    ``SEARCH``, in that order; a test keeps the two lists equal), leading axis S, and
+    ``labels`` for people (names, task ids, C values), never passed to JAX."""
+
+    task_mask: np.ndarray
+    kind: np.ndarray
+    center_init: np.ndarray
+    quat_init: np.ndarray
+    dims_init: np.ndarray
+    center_opt: np.ndarray
+    quat_opt: np.ndarray
+    dims_opt: np.ndarray
+    cluster: np.ndarray
+    yaw_meta: np.ndarray
+    orient_kind: np.ndarray
+    orient_quat: np.ndarray
+    orient_axis: np.ndarray
+    starts: np.ndarray
+    obj_mask: np.ndarray
+    obj_kind: np.ndarray
+    obj_center: np.ndarray
+    obj_quat: np.ndarray
+    obj_size: np.ndarray
+    dt: np.ndarray
+    v_max: np.ndarray
+    omega_max: np.ndarray
+    activation_tol: np.ndarray
+    max_steps: np.ndarray
+    ambiguity_nearest: np.ndarray
+    collision: np.ndarray
+    gripper_finger_length: np.ndarray
+    gripper_finger_radius: np.ndarray
+    gripper_opening: np.ndarray
+    gripper_palm_radius: np.ndarray
+    q_mask: np.ndarray
+    q_min: np.ndarray
+    q_init: np.ndarray
+    q_shrunk: np.ndarray
+    center_dq: np.ndarray
+    dims_dq: np.ndarray
+    opt_starts: np.ndarray
+    opt_start_mask: np.ndarray
+    optimize_seed: np.ndarray
+    optimize_population: np.ndarray
+    optimize_generations: np.ndarray
+    start_plane: np.ndarray
+    optimize_validation_starts: np.ndarray
+    optimize_validation_seed: np.ndarray
+    optimize_candidates: np.ndarray
+    optimize_validate: np.ndarray
+    labels: dict = field(default_factory=dict, compare=False)
 
     @property
     def n_scenes(self) -> int:
@@ -85,16 +136,6 @@ def batch_layout(arrays, modes=schema.MODES, lanes_per_block: int | None = None,
         samples_per_block=samples_per_block)
 
 
-BakedScenes = make_dataclass(
-    "BakedScenes",
-    [(k, np.ndarray) for k in GEOMETRY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS]
-    + [("labels", dict, field(default_factory=dict, compare=False))],
-    bases=(_Batch,), frozen=True)
-BakedScenes.__module__ = __name__
-BakedScenes.__doc__ = """A bake: one NumPy array per schema field (GEOMETRY, PARAMS, SEARCH),
-leading axis S, and ``labels`` for people (names, task ids, C values)."""
-
-
 def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> BakedScenes:
     """Bakes of one shape (tasks, objects, starts) as one, scenes in order; ``pad_to``:
     that many scenes, the last repeated (a padded scene's results are dropped by who
@@ -105,7 +146,8 @@ def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> Bake
     if pad_to is not None and pad_to > S:
         arrays = {k: np.concatenate([a, np.repeat(a[-1:], pad_to - S, axis=0)])
                   for k, a in arrays.items()}
-    labels = {k: [x for b in bakes for x in b.labels[k]] for k in ("names", "task_ids")}
+    labels: dict[str, Any] = {k: [x for b in bakes for x in b.labels[k]]
+                              for k in ("names", "task_ids")}
     labels.update({k: np.concatenate([b.labels[k] for b in bakes])
                    for k in ("C_init", "C_final")})
     return BakedScenes(**arrays, labels=labels)
@@ -122,7 +164,7 @@ def is_horizontal_approach(q) -> bool:
     ry = w * fy - x * fz + y * fw + z * fx
     rw = w * fw - x * fx - y * fy - z * fz
     rz = w * fz + x * fy - y * fx + z * fw
-    return abs(rx) + abs(ry) <= 64 * np.finfo(np.float64).eps and rw * rw + rz * rz > 0.5
+    return bool(abs(rx) + abs(ry) <= 64 * np.finfo(np.float64).eps and rw * rw + rz * rz > 0.5)
 
 
 def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:

@@ -19,9 +19,10 @@ def object_body(obj: SceneObject) -> Shape:
     """The object's body as a shape (cylinder or box), for collision checks."""
     x, y, z = obj.position
     if obj.kind == "box":
-        ex, ey, ez = obj.half_extents
+        ex, ey, ez = obj.box_half_extents
         return Shape("box", (x, y, z + ez), quat_of_rotation(yaw_matrix(obj.yaw)), (ex, ey, ez))
-    return Shape("cylinder", (x, y, z + obj.height / 2), IDENTITY, (obj.radius, obj.height, 0.0))
+    r, h = obj.body_radius, obj.body_height
+    return Shape("cylinder", (x, y, z + h / 2), IDENTITY, (r, h, 0.0))
 
 
 def inside(body: Shape, p) -> bool:

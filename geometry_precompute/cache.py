@@ -142,12 +142,15 @@ def cached(scene: Scene | tuple, settings: Settings, folder: Path | None
     """(result, whether it came from the cache, why it could not be stored or None) of
     a Scene, or of ``random_scene``'s arguments (the scene is built only when its result
     is not cached). ``folder`` None: no cache."""
-    is_scene = isinstance(scene, Scene)
+    def build() -> Scene:
+        return scene if isinstance(scene, Scene) else random_scene(*scene)
+
     if folder is None:
-        return precompute(scene if is_scene else random_scene(*scene), settings), False, None
-    key = scene_key(scene, settings) if is_scene else random_key(scene, settings)
+        return precompute(build(), settings), False, None
+    is_scene = isinstance(scene, Scene)
+    key = scene_key(scene, settings) if isinstance(scene, Scene) else random_key(scene, settings)
     path = folder / f"{key}.json"
-    source = scene.source if is_scene else None
+    source = scene.source if isinstance(scene, Scene) else None
     try:
         data = path.read_bytes()
     except OSError:
@@ -156,7 +159,7 @@ def cached(scene: Scene | tuple, settings: Settings, folder: Path | None
         found = _read(data, key, settings, is_scene, source)
         if found is not None:
             return found, True, None
-    r = precompute(scene if is_scene else random_scene(*scene), settings)
+    r = precompute(build(), settings)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         write_atomic(path, _entry(key, r))

@@ -15,6 +15,7 @@ id, say) are shown escaped, and very long quotes are cut (:func:`one_line`).
 
 from __future__ import annotations
 
+import os
 import reprlib
 
 MAX_LINE = 600  # characters of one message; longer quotes are cut with "..."
@@ -44,8 +45,8 @@ class InputError(ValueError):
     and ``rule`` what was expected and what was found. Raised by every loader and
     public function before anything is written; a ``ValueError``."""
 
-    def __init__(self, source: str, field: str, rule: str):
-        self.source = one_line(source, 200)
+    def __init__(self, source: str | os.PathLike, field: str, rule: str):
+        self.source = one_line(str(source), 200)
         self.field = one_line(field, 200)
         self.rule = one_line(rule)
         super().__init__(f"{self.source}: {self.field}: {self.rule}")
@@ -56,7 +57,17 @@ class InputError(ValueError):
 
 
 class HostError(OSError):
-    """The machine refused: ``path: cannot <action> (<reason>)``."""
+    """The machine refused: ``path: cannot <action> (<reason>)``: a full disk, a
+    folder without write permission, a cache that cannot be created. The command line
+    prints it as one line and exits with status 1, as it does an :class:`InputError`;
+    an ``OSError``, so ``except OSError`` catches it.
+
+    Example::
+
+        >>> from geometry_precompute import HostError
+        >>> str(HostError("/data/out", "write", "No space left on device"))
+        '/data/out: cannot write (No space left on device)'
+    """
 
     def __init__(self, path, action: str, reason: str):
         self.path = one_line(str(path), 300)

@@ -45,8 +45,24 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def scene_from_dict(data, source: str = "<scene>") -> Scene:
-    """A validated Scene of a parsed table; a loaded scene is one the precompute can
-    run, but for objects that interpenetrate (checked there)."""
+    """A validated Scene of a parsed table (what ``load_scene`` does after reading the
+    file): every field checked (an ``InputError`` naming ``source``, the field and the
+    rule), unit slips warned about, ``_deg`` spellings converted. A loaded scene is one
+    the precompute can run, but for objects that interpenetrate (checked there).
+
+    :param data: the scene as a dict, the TOML file's structure (positions in m, yaws
+        in rad).
+    :param source: the name errors use for the input.
+
+    Example::
+
+        >>> from geometry_precompute import scene_from_dict
+        >>> scene = scene_from_dict({"name": "one-mug",
+        ...     "objects": [{"id": "m", "kind": "mug", "position": [0.0, 0.0, 0.0]}],
+        ...     "tasks": [{"id": "grasp", "object": "m", "template": "side_grasp"}]})
+        >>> [t.id for t in scene.tasks]
+        ['grasp']
+    """
     scene = parse_scene(data, source)
     _warn_legal_oddities(scene, resolve_tasks(scene, scene.settings()))
     return scene

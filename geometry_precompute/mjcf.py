@@ -34,6 +34,7 @@ def _geom(shape: Shape, name: str, rgba: str, collide: bool, group: int,
     if mesh is not None:
         return f'<geom name={quoteattr(name)} type="mesh" mesh="{mesh}" rgba="{rgba}" ' \
                f'group="{group}"{flags}/>'
+    size: tuple[float, ...]
     if shape.kind in ("cylinder", "disk"):
         kind, size = "cylinder", (a, b / 2)
     else:

@@ -289,7 +289,7 @@ def _cyl_arrays(shapes: Sequence[Shape]):
 def fast_volumes(shapes: Sequence[Shape], pairs: Sequence[tuple[int, int]]
                  ) -> tuple[dict, list[tuple[int, int]]]:
     """({pair: volume} for the pairs with a fast path, [pairs left for the boolean])."""
-    groups: dict[str, list[tuple[int, int]]] = {}
+    groups: dict[str, list[tuple[int, int, int, int]]] = {}
     rest = []
     for i, j in pairs:
         k = pair_kind(shapes[i], shapes[j])

@@ -74,15 +74,23 @@ class SceneObject:
     def body_radius(self) -> float:
         """The object's radius; for a box the half-diagonal of its top face."""
         if self.kind == "box":
-            ex, ey, _ = self.half_extents
+            ex, ey, _ = self.box_half_extents
             return math.hypot(ex, ey)
+        assert self.radius is not None  # the loader gives every cylinder kind its size
         return self.radius
 
     @property
     def body_height(self) -> float:
         if self.kind == "box":
-            return 2.0 * self.half_extents[2]
+            return 2.0 * self.box_half_extents[2]
+        assert self.height is not None
         return self.height
+
+    @property
+    def box_half_extents(self) -> tuple[float, float, float]:
+        """A box's half extents (m); the loader gives every box its extents."""
+        assert self.half_extents is not None, f"object {self.id} is not a box"
+        return self.half_extents
 
 
 @dataclass(frozen=True)
@@ -325,7 +333,7 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
         if o.yaw:
             d["yaw"] = o.yaw
         if o.kind == "box":
-            d["half_extents"] = list(o.half_extents)
+            d["half_extents"] = list(o.box_half_extents)
         else:
             if o.radius != OBJECT_DEFAULTS[o.kind]["radius"]:
                 d["radius"] = o.radius
@@ -349,5 +357,20 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
-    """Write ``scene`` as TOML (``fileio.write_atomic``)."""
+    """Write ``scene`` as a scene file (TOML, the format ``load_scene`` reads; written
+    atomically, so a full disk leaves no half file). Values equal to an object kind's
+    default size are left out.
+
+    :param scene: a :class:`Scene` (``load_scene``, ``random_scene``, ``scene_from_dict``).
+    :param path: the file to write.
+
+    Example::
+
+        >>> import tempfile, pathlib
+        >>> from geometry_precompute import load_scene, random_scene, save_scene
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "scene.toml"
+        >>> save_scene(random_scene(seed=3), path)
+        >>> len(load_scene(path).tasks) == len(random_scene(seed=3).tasks)
+        True
+    """
     write_atomic(path, tomli_w.dumps(scene_to_dict(scene)).encode())

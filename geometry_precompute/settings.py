@@ -65,7 +65,7 @@ def _range(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False):
     return rule, check, schema
 
 
-_TYPES = {"float": {"type": "number"}, "int": {"type": "integer"},
+_TYPES: dict[str, dict[str, Any]] = {"float": {"type": "number"}, "int": {"type": "integer"},
           "choice": {"type": "string"},
           "int_pair": {"type": "array", "items": {"type": "integer"}, "minItems": 2,
                        "maxItems": 2},
@@ -375,7 +375,19 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
 
 
 class Settings(Mapping[str, Any]):
-    """An immutable, validated set of every setting (reference/settings)."""
+    """An immutable, validated set of every setting (reference/settings): a read-only
+    mapping from a setting's name (``"v_max"``, ``"gripper.opening"``) to its value, in
+    the units the reference gives (m, s, rad). Built from the defaults; a scene's
+    ``[settings]``, a sweep point and ``--set`` override it through
+    :meth:`with_overrides`, which checks each value's type and range.
+
+    Example::
+
+        >>> from geometry_precompute import Settings
+        >>> s = Settings().with_overrides({"v_max": 0.5})
+        >>> s["v_max"], s["dt"]
+        (0.5, 0.02)
+    """
 
     __slots__ = ("_values",)
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .intersect import SpaceSet
+from .shapes import Shape
 from .templates import TaskSpace
 
 
@@ -78,7 +79,7 @@ def shrink(spaces: Sequence[TaskSpace], sigma: float = 0.05, max_iter: int = 100
     active = list(pairs) if pairs is not None else coll.intersecting_pairs()
     seqs = [shrink_sequence(s, sigma, max_iter) for s in spaces]
     last = [len(q) - 1 for q in seqs]  # shrinks each task can make
-    shapes: dict[tuple[int, int], object] = {}
+    shapes: dict[tuple[int, int], Shape] = {}
 
     def intersects_after(i: int, j: int, k: int) -> bool:
         for t in (i, j):

@@ -65,7 +65,8 @@ class TaskSpace:
 def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:
     """The cup handle's grasp point g and direction u (reference/scenes)."""
     u = np.array([np.cos(obj.yaw), np.sin(obj.yaw), 0.0])
-    g = np.asarray(obj.position) + (obj.radius + offset) * u + np.array([0, 0, obj.height / 2])
+    g = np.asarray(obj.position) + (obj.body_radius + offset) * u \
+        + np.array([0, 0, obj.body_height / 2])
     return g, u
 
 
@@ -93,7 +94,7 @@ def _build_shape(template: str, obj: SceneObject, q, fixed: dict, pose_quat: tup
         center = center or (x, y, z + obj.body_height + fixed["offset"])
         return Shape("disk", center, pose_quat, (float(q[0]), fixed["thickness"], 0.0))
     # drawer_pull: the local -x face stays put, the far face moves with the depth.
-    ex, _, ez = obj.half_extents
+    ex, _, ez = obj.box_half_extents
     depth = float(q[0])
     c, s = np.cos(obj.yaw), np.sin(obj.yaw)
     lx = -ex - depth / 2
@@ -116,7 +117,7 @@ def _template_values(template: str, obj: SceneObject, s: Settings) -> tuple[dict
         return ({"radius": (obj.body_radius + s["top_grasp.radius_margin"],
                             s["top_grasp.radius_init"])},
                 {"thickness": s["top_grasp.thickness"], "offset": s["top_grasp.offset"]})
-    _, ey, ez = obj.half_extents
+    _, ey, ez = obj.box_half_extents
     return ({"depth": (s["drawer_pull.depth_min"], s["drawer_pull.depth_init"])},
             {"width": 2 * ey, "height": 2 * ez})
 

@@ -352,13 +352,20 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
 
 # The structure of evaluate's output (for the exported program cache, which stores flat
 # leaves).
-_EVALUATION_STRUCTURE = Evaluation(Rollouts(*[0] * len(Rollouts._fields)),
-                                   SceneMetrics(*[0] * len(SceneMetrics._fields)))
+_EVALUATION_STRUCTURE = Evaluation(Rollouts._make([0] * len(Rollouts._fields)),
+                                   SceneMetrics._make([0] * len(SceneMetrics._fields)))
 
 
 def evaluate_cached(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     """:func:`evaluate` through the exported program cache (``program_cache``; the
-    plain call when no cache folder is set)."""
+    plain call when no cache folder is set): a later process with the same layout,
+    shapes and dtypes loads the compiled program instead of compiling it.
+
+    Example::
+
+        geometry, params, layout = shacc_jax.inputs(bake(results))
+        ev = shacc_jax.evaluate_cached(geometry, params, layout)   # as evaluate
+    """
     return program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
                               _EVALUATION_STRUCTURE)
 
@@ -415,7 +422,15 @@ def evaluate_on_devices(geometry: Geometry, params: Params, layout: Layout,
 
     ``fields``: the :class:`Rollouts` fields to copy to the host (default: all); the
     others are None. A sweep keeps 4 of the 8, which is 17 of a chunk's 57 MB; the
-    copy to the host is most of an evaluation's time after the run itself."""
+    copy to the host is most of an evaluation's time after the run itself.
+
+    Example::
+
+        geometry, params, layout = shacc_jax.inputs(bake(results))
+        ev = shacc_jax.evaluate_on_devices(geometry, params, layout,
+                                           fields=("outcome", "delta_R"))
+        ev.rollouts.point is None          # not copied back
+    """
     from concurrent.futures import ThreadPoolExecutor
 
     import numpy as np
@@ -455,7 +470,14 @@ def evaluate_sharded(geometry: Geometry, params: Params, layout: Layout,
     ``jax.shard_map`` runs :func:`evaluate` on each device's scenes (the lane sort and
     the while loops are per device, with no communication). S is padded to a multiple
     of the device count by repeating the last scene; the result (NumPy) has the
-    original S. Params without a points axis only."""
+    original S. Params without a points axis only.
+
+    Example::
+
+        geometry, params, layout = shacc_jax.inputs(bake(results))
+        ev = shacc_jax.evaluate_sharded(geometry, params, layout)   # every local device
+        ev.metrics.u_scene.shape                                    # (S, M)
+    """
     import numpy as np
     from jax.sharding import Mesh, NamedSharding
     from jax.sharding import PartitionSpec as P

@@ -48,5 +48,16 @@ def host_metrics(outcome, delta_r, task_mask) -> SceneMetrics:
     rollouts as a float64 fraction, delta_R_mean the float64 mean of the successes'
     delta_R (NaN where there is none), outcome_counts (*lead, S, M, 5) and n_rollouts
     (*lead, S, M) as int64 (``geometry_precompute.outcomes``, which a sweep's CPU workers
-    use without JAX)."""
+    use without JAX).
+
+    Example::
+
+        >>> import numpy as np
+        >>> from shacc_jax import host_metrics
+        >>> outcome = np.array([[[[0, 1], [0, 0]]]])        # S=1, M=1, N=2, T=2
+        >>> delta_r = np.array([[[[0.1, np.nan], [0.3, 0.2]]]])
+        >>> m = host_metrics(outcome, delta_r, np.array([[True, True]]))
+        >>> float(m.u_scene[0, 0]), round(float(m.delta_R_mean[0, 0]), 3)
+        (0.75, 0.2)
+    """
     return SceneMetrics(*scene_metrics_np(outcome, delta_r, task_mask))

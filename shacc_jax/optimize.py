@@ -31,6 +31,7 @@ Scenes are searched in groups of equal task count, each cut to its own tasks (se
 from __future__ import annotations
 
 from functools import partial
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -42,15 +43,15 @@ from geometry_precompute import schema
 from . import program_cache, shapes
 from . import quaternion as quat
 from .evaluation import activation_pass
-from .types import SUCCESS, Geometry, Params, Search, SearchProblem
+from .types import SUCCESS, AnyArray, Geometry, Params, Search, SearchProblem
 
 SIGMA0 = 0.3  # CMA-ES's initial step, in units of each parameter's range
 GRID = 1024   # candidates lie on a grid of 1/GRID of each parameter's range
 MEAN0 = "center"  # where CMA-ES's mean starts: "center" of the box, or "shrinking"
 
 
-def spaces_at(center_init: Array, dims_init: Array, problem: SearchProblem, q: Array,
-              xp=jnp) -> tuple[Array, Array]:
+def spaces_at(center_init: AnyArray, dims_init: AnyArray, problem: SearchProblem,
+              q: AnyArray, xp=jnp) -> tuple[Any, Any]:
     """The spaces' centres and dims (..., T, 3) at parameters q (..., T, P): the bake's
     affine maps, for one scene or a batch alike (``xp``: jax.numpy, or numpy on the
     host)."""
@@ -179,7 +180,7 @@ def _best_distinct(z: Array, f: Array, *scores: Array, k: int) -> tuple[Array, .
     made inf), in order of fitness, the earlier row first on a tie; with their fitness
     and ``scores``."""
     order = jnp.argsort(f, stable=True)
-    z, f, scores = z[order], f[order], [s[order] for s in scores]
+    z, f, scores = z[order], f[order], tuple(s[order] for s in scores)
     same = jnp.all(z[:, None, :] == z[None, :, :], axis=-1)
     f = jnp.where(jnp.any(jnp.tril(same, k=-1), axis=1), jnp.inf, f)
     order = jnp.argsort(f, stable=True)[:k]
@@ -301,7 +302,7 @@ def _search(geometry: Geometry, params: Params, problem: SearchProblem, populati
                             candidates=candidates, n_val=n_val))(geometry, params, problem)
 
 
-_SEARCH_STRUCTURE = Search(*[0] * len(Search._fields))
+_SEARCH_STRUCTURE = Search._make([0] * len(Search._fields))
 
 
 SIZES = ("optimize_population", "optimize_generations", "optimize_candidates")
@@ -393,7 +394,7 @@ def cut(tree, idx: np.ndarray, n: int):
 def optimized_spaces(baked, found: Search) -> tuple[np.ndarray, np.ndarray]:
     """(center, dims) (S, T, 3) of the spaces at the search's parameters, float64, for
     the bake's ``center_opt`` / ``dims_opt`` of the optimized mode."""
-    pb = SearchProblem(*(np.asarray(getattr(baked, k)) for k in SearchProblem._fields))
+    pb = SearchProblem._make(np.asarray(getattr(baked, k)) for k in SearchProblem._fields)
     return spaces_at(np.asarray(baked.center_init, np.float64),
                      np.asarray(baked.dims_init, np.float64), pb,
                      np.asarray(found.q, np.float64), xp=np)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import jax
 from jax import export
@@ -62,11 +63,12 @@ def _source_hash() -> str:
 def _key(name: str, static: tuple, tree, leaves: list) -> str:
     import jaxlib
 
+    flags: Any = jax.config  # its flags are attributes that type checkers do not see
     parts = [name, _source_hash(), jax.__version__, jaxlib.__version__,
-             jax.default_backend(), str(jax.config.jax_enable_x64), repr(static), str(tree),
+             jax.default_backend(), str(flags.jax_enable_x64), repr(static), str(tree),
              # the stack frames kept in the program's source locations
-             str(jax.config.jax_traceback_in_locations_limit),
-             str(jax.config.jax_include_full_tracebacks_in_locations)]
+             str(flags.jax_traceback_in_locations_limit),
+             str(flags.jax_include_full_tracebacks_in_locations)]
     parts += [f"{tuple(x.shape)}:{x.dtype}" for x in leaves]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 
-def _eps(x: Array) -> Array:
+def _eps(x: Array) -> np.floating:
     return jnp.finfo(x.dtype).eps
 
 

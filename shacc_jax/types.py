@@ -15,7 +15,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from geometry_precompute import schema
 from geometry_precompute.schema import (  # noqa: F401  (re-exported)
@@ -34,9 +34,30 @@ from geometry_precompute.schema import (  # noqa: F401  (re-exported)
 
 from .shapes import prepare_all
 
+# What a result holds: JAX arrays as ``evaluate`` returns them, NumPy arrays once copied
+# to the host (``sweeps.pipeline`` returns them so). The inputs (Geometry, Params,
+# SearchProblem) are typed as the kernel receives them, JAX arrays.
+AnyArray = Array | np.ndarray
+
 
 class Spaces(NamedTuple):
-    """One scene's position spaces (T tasks)."""
+    """One scene's position spaces, T tasks: ``kind`` (T,) shape codes
+    (``geometry_precompute.schema.KINDS``), ``center`` (T, 3) m (a cone's apex),
+    ``quat`` (T, 4) rotations (w, x, y, z), ``dims`` (T, 3): cylinder and disk (radius,
+    height, 0) m, cone (length m, half angle rad, 0), box half extents m. What
+    :func:`shacc_jax.clutteredness_mc` samples.
+
+    Example::
+
+        >>> import jax.numpy as jnp
+        >>> from shacc_jax import Spaces
+        >>> two_cylinders = Spaces(jnp.zeros(2, jnp.int32),
+        ...                        jnp.array([[0.0, -0.05, 0.1], [0.0, 0.05, 0.1]]),
+        ...                        jnp.tile(jnp.array([1.0, 0.0, 0.0, 0.0]), (2, 1)),
+        ...                        jnp.array([[0.08, 0.1, 0.0], [0.08, 0.1, 0.0]]))
+        >>> two_cylinders.center.shape
+        (2, 3)
+    """
 
     kind: Array
     center: Array
@@ -63,13 +84,40 @@ def _read(cls, baked, dtype=None):
     return cls(**out)
 
 
-class _FromBake:
+class Geometry(NamedTuple):
+    """A batch's baked arrays, leading axis S scenes: the spaces before and after
+    Shrinking (kind, centre in m, quaternion w first, dims in m or rad), the task mask,
+    clusters, orientation spaces, objects and the start poses (S, N, 7).
+    ``geometry_precompute.schema.GEOMETRY`` gives each field's meaning (the reference's
+    outputs page lists them); ``Geometry.from_bake(baked)`` builds it. The fields are
+    the schema's, in its order (a test keeps them so)."""
+
+    task_mask: Bool[Array, "S T"]
+    kind: Int[Array, "S T"]
+    center_init: Float[Array, "S T 3"]
+    quat_init: Float[Array, "S T 4"]
+    dims_init: Float[Array, "S T 3"]
+    center_opt: Float[Array, "S T 3"]
+    quat_opt: Float[Array, "S T 4"]
+    dims_opt: Float[Array, "S T 3"]
+    cluster: Int[Array, "S T"]
+    yaw_meta: Bool[Array, " S"]
+    orient_kind: Int[Array, "S T"]
+    orient_quat: Float[Array, "S T 4"]
+    orient_axis: Float[Array, "S T 2"]
+    starts: Float[Array, "S N 7"]
+    obj_mask: Bool[Array, "S O"]
+    obj_kind: Int[Array, "S O"]
+    obj_center: Float[Array, "S O 3"]
+    obj_quat: Float[Array, "S O 4"]
+    obj_size: Float[Array, "S O 3"]
+
     @classmethod
-    def from_bake(cls, baked, dtype=None):
+    def from_bake(cls, baked, dtype=None) -> Geometry:
+        """The fields read from a bake (or a mapping) by name; floats cast to ``dtype``
+        (default float32, float64 with x64 on)."""
         return _read(cls, baked, dtype)
 
-
-class _GeometryMethods(_FromBake):
     def spaces(self, which: str):
         """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation
         matrices and cone trigonometry computed once): a ``shapes.Prepared`` over
@@ -78,30 +126,60 @@ class _GeometryMethods(_FromBake):
                            getattr(self, f"quat_{which}"), getattr(self, f"dims_{which}"))
 
 
-class _ParamsMethods(_FromBake):
+class Params(NamedTuple):
+    """Every rollout setting (``geometry_precompute.schema.PARAMS``) as a leaf of shape
+    (S,), or (P, S) for P sweep points over one geometry. Leaves, so new values never
+    recompile. The fields are the schema's, in its order (a test keeps them so)."""
+
+    dt: Float[Array, "*P S"]
+    v_max: Float[Array, "*P S"]
+    omega_max: Float[Array, "*P S"]
+    activation_tol: Float[Array, "*P S"]
+    max_steps: Int[Array, "*P S"]
+    ambiguity_nearest: Bool[Array, "*P S"]
+    collision: Bool[Array, "*P S"]
+    gripper_finger_length: Float[Array, "*P S"]
+    gripper_finger_radius: Float[Array, "*P S"]
+    gripper_opening: Float[Array, "*P S"]
+    gripper_palm_radius: Float[Array, "*P S"]
+
+    @classmethod
+    def from_bake(cls, baked, dtype=None) -> Params:
+        """The settings read from a bake (or a mapping) by name (see
+        :meth:`Geometry.from_bake`)."""
+        return _read(cls, baked, dtype)
+
     def gripper(self) -> Float[Array, "... 4"]:
         """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
         return jnp.stack([getattr(self, k) for k in schema.GRIPPER], axis=-1)
 
 
-def _pytree(name: str, fields, methods, doc: str):
-    base = NamedTuple(f"_{name}", [(f.name, Array) for f in fields])
-    return type(name, (base, methods), {"__doc__": doc, "__slots__": (),
-                                        "__module__": __name__})
+class SearchProblem(NamedTuple):
+    """What the optimized mode's search needs beyond Geometry and Params
+    (``geometry_precompute.schema.SEARCH``; the fields are the schema's, in its
+    order)."""
 
+    q_mask: Bool[Array, "S T P"]
+    q_min: Float[Array, "S T P"]
+    q_init: Float[Array, "S T P"]
+    q_shrunk: Float[Array, "S T P"]
+    center_dq: Float[Array, "S T 3 P"]
+    dims_dq: Float[Array, "S T 3 P"]
+    opt_starts: Float[Array, "S No 7"]
+    opt_start_mask: Bool[Array, "S No"]
+    optimize_seed: Int[Array, " S"]
+    optimize_population: Int[Array, " S"]
+    optimize_generations: Int[Array, " S"]
+    start_plane: Float[Array, "S 5"]
+    optimize_validation_starts: Int[Array, " S"]
+    optimize_validation_seed: Int[Array, " S"]
+    optimize_candidates: Int[Array, " S"]
+    optimize_validate: Bool[Array, " S"]
 
-Geometry = _pytree("Geometry", schema.GEOMETRY, _GeometryMethods,
-                   "A batch's baked arrays, leading axis S scenes: the spaces before and "
-                   "after Shrinking (kind, center m, quat w first, dims m or rad), the "
-                   "task mask, clusters, orientation spaces, objects and the start poses "
-                   "(S, N, 7). geometry_precompute/schema.py (GEOMETRY) lists every field "
-                   "with its shape; Geometry.from_bake(baked) builds it.")
-Params = _pytree("Params", schema.PARAMS, _ParamsMethods,
-                 "Every rollout setting (schema.PARAMS): leaves of shape (S,), or (P, S) "
-                 "for P sweep points over one geometry.")
-SearchProblem = _pytree("SearchProblem", schema.SEARCH, _FromBake,
-                        "What the optimized mode's search needs beyond Geometry and Params "
-                        "(schema.SEARCH).")
+    @classmethod
+    def from_bake(cls, baked, dtype=None) -> SearchProblem:
+        """The search's arrays read from a bake by name (see :meth:`Geometry.from_bake`)."""
+        return _read(cls, baked, dtype)
 
 
 def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,
@@ -132,17 +210,17 @@ class Search(NamedTuple):
     ``winner`` names the chosen candidate: 0 Shrinking's sizes, 1 + r the search's
     (r + 1)-th best distinct candidate, ``optimize_candidates`` + 1 the initial sizes."""
 
-    q: Float[Array, "S T P"]                # the chosen candidate's parameters
-    objective: Float[Array, " S"]           # its u_scene on the search starts
-    volume: Float[Array, " S"]              # its spaces' summed volume, m^3
-    objective_init: Float[Array, " S"]      # the initial spaces' u_scene, same starts
-    objective_shrunk: Float[Array, " S"]    # Shrinking's
-    history: Float[Array, "S G"]            # best search objective so far, per generation
-    validation: Float[Array, " S"]          # the chosen candidate's u_scene, validation
-    validation_init: Float[Array, " S"]     # the initial sizes', validation starts
-    validation_shrunk: Float[Array, " S"]   # Shrinking's, validation starts
-    winner: Int[Array, " S"]                # which candidate was chosen (above)
-    clutteredness: Float[Array, " S"]       # C of the chosen spaces, estimated
+    q: Float[AnyArray, "S T P"]                # the chosen candidate's parameters
+    objective: Float[AnyArray, " S"]           # its u_scene on the search starts
+    volume: Float[AnyArray, " S"]              # its spaces' summed volume, m^3
+    objective_init: Float[AnyArray, " S"]      # the initial spaces' u_scene, same starts
+    objective_shrunk: Float[AnyArray, " S"]    # Shrinking's
+    history: Float[AnyArray, "S G"]            # best search objective so far, per generation
+    validation: Float[AnyArray, " S"]          # the chosen candidate's u_scene, validation
+    validation_init: Float[AnyArray, " S"]     # the initial sizes', validation starts
+    validation_shrunk: Float[AnyArray, " S"]   # Shrinking's, validation starts
+    winner: Int[AnyArray, " S"]                # which candidate was chosen (above)
+    clutteredness: Float[AnyArray, " S"]       # C of the chosen spaces, estimated
 
 
 class Rollouts(NamedTuple):
@@ -156,14 +234,14 @@ class Rollouts(NamedTuple):
     ``orientation``: the end orientation, a unit quaternion (w, x, y, z). Padded tasks
     (``task_mask`` False) hold no rollout: read ``[..., :T_scene]``."""
 
-    outcome: Int[Array, "S M N T"]
-    activated: Int[Array, "S M N T"]
-    step: Int[Array, "S M N T"]
-    point: Float[Array, "S M N T 3"]
-    path_length: Float[Array, "S M N T"]
-    meta_steps: Int[Array, "S M N T"]
-    delta_R: Float[Array, "S M N T"]  # NaN unless success
-    orientation: Float[Array, "S M N T 4"]  # R at the end (w, x, y, z)
+    outcome: Int[AnyArray, "S M N T"]
+    activated: Int[AnyArray, "S M N T"]
+    step: Int[AnyArray, "S M N T"]
+    point: Float[AnyArray, "S M N T 3"]
+    path_length: Float[AnyArray, "S M N T"]
+    meta_steps: Int[AnyArray, "S M N T"]
+    delta_R: Float[AnyArray, "S M N T"]  # NaN unless success
+    orientation: Float[AnyArray, "S M N T 4"]  # R at the end (w, x, y, z)
 
 
 class SceneMetrics(NamedTuple):
@@ -172,10 +250,10 @@ class SceneMetrics(NamedTuple):
     success; ``outcome_counts`` (S, M, 5) in the order of ``shacc_jax.OUTCOMES``;
     ``n_rollouts``, the real (unpadded) rollouts."""
 
-    u_scene: Float[Array, "S M"]
-    delta_R_mean: Float[Array, "S M"]  # NaN where a mode has no success
-    outcome_counts: Int[Array, "S M 5"]
-    n_rollouts: Int[Array, "S M"]
+    u_scene: Float[AnyArray, "S M"]
+    delta_R_mean: Float[AnyArray, "S M"]  # NaN where a mode has no success
+    outcome_counts: Int[AnyArray, "S M 5"]
+    n_rollouts: Int[AnyArray, "S M"]
 
 
 class Evaluation(NamedTuple):

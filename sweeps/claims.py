@@ -12,6 +12,8 @@ includes zero; a level ("about 30 %") when our mean is within 10 points of it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .stats import mean_ci, paired_diff_ci, relative_change_ci
@@ -90,7 +92,7 @@ def check(scenes: list[dict], correlation: dict, n_boot: int = 10_000,
           ", ".join(f"{k} {c['rho']:.2f} [{c['ci'][0]:.2f}, {c['ci'][1]:.2f}]"
                     for k, c in zip("dh", dh, strict=True) if c.get("ci")) or "n/a",
           ok, "both intervals include zero")
-    levels = {}
+    levels: dict[str, Any] = {}
     for cat in ("cluttered", "gaussian", "uncluttered", "uniform"):
         sel = pick([cat])
         levels[cat] = mean_ci([s["C_init"] for s in sel], n_boot, seed) if sel else None
@@ -146,8 +148,9 @@ def check(scenes: list[dict], correlation: dict, n_boot: int = 10_000,
               f"({_ci(rel, signed=True)}; paired difference {_ci(d, unit=' points', signed=True)})",
               None if not d["ci"] else d["ci"][0] > 0, "paired interval above zero")
     sparse = [pick(["uncluttered"]), uni]
-    ds = [paired_diff_ci(arr(sel, "baseline", "u_scene"), arr(sel, "shrinking", "u_scene"),
-                         n_boot, seed) if sel else None for sel in sparse]
+    ds: list[Any] = [paired_diff_ci(arr(sel, "baseline", "u_scene"),
+                                    arr(sel, "shrinking", "u_scene"), n_boot, seed)
+                     if sel else None for sel in sparse]
     claim("u_sparse", "no significant change of success on uncluttered and uniform scenes",
           "no significant improvement",
           ", ".join(f"{name} {_ci(d, unit=' points', signed=True)}" for name, d in

@@ -32,6 +32,10 @@ import signal
 import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 PRECOMPUTE = "precompute"
 EVALUATE = "evaluate"
@@ -43,7 +47,7 @@ class Pool:
     """What :func:`connect` found: the client, the resources each kind of task asks
     for (None: any worker), and how many threads take each kind."""
 
-    client: object
+    client: Client
     precompute: dict | None
     evaluate: dict | None
     precompute_threads: int
@@ -375,7 +379,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     # Its failed reconnections, with tracebacks, when the scheduler is gone: the command
     # says that in one line (ClusterLost).
     logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
-    cluster = None
+    cluster: Any = None
     with warnings.catch_warnings():
         # distributed warns when a port is taken (it picks another) or bokeh is missing.
         warnings.simplefilter("ignore")
@@ -386,7 +390,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
 
             client = _client(scheduler, SCHEDULER_TIMEOUT)
     try:
-        if cluster is None:
+        if scheduler is not None:
             pool = _remote(client, scheduler, timeout)
         else:
             client.wait_for_workers(n_cpu + n_eval, timeout=timeout)

@@ -250,11 +250,11 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
 
         for scene in scenes:  # the rest of reference/errors: here, not mid-sweep
             check_bodies_apart(scene)
-        for k, p in enumerate(points):
+        for i, p in enumerate(points):
             grids = {tuple(s.settings(DEFAULTS, p)["start_grid"]): s.source for s in scenes}
             if len(grids) > 1:
                 raise InputError(src, "source.path", f"the scenes ask for different start "
-                                 f"grids {sorted(grids)} (point {k}); a point's scenes are "
+                                 f"grids {sorted(grids)} (point {i}); a point's scenes are "
                                  "evaluated as one batch: set start_grid in the config's "
                                  "[settings] or make the scenes agree")
     return cfg

@@ -78,12 +78,12 @@ def _setup() -> None:
 
         compile_cache.enable()
 
-        def on_duration(event: str, duration: float, **_) -> None:
+        def on_duration(event: str, duration_secs: float, **_: str | int) -> None:
             # Timed around every backend compilation, persistent-cache loads included.
             if event == "/jax/core/compile/backend_compile_duration":
                 _COUNTS["programs"] += 1
 
-        def on_event(event: str, **_) -> None:
+        def on_event(event: str, **_: str | int) -> None:
             if event == "/jax/compilation_cache/cache_hits":
                 _COUNTS["loaded"] += 1
 

@@ -5,6 +5,7 @@ this and the CPU half)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 from geometry_precompute import InputError, PrecomputeResult, load_scene, precompute
 from geometry_precompute.settings import parse_cli_value
@@ -21,7 +22,7 @@ def parse_sets(pairs: Sequence[str]) -> dict:
     return out
 
 
-def load_and_precompute(path: str, sets: Sequence[str]) -> PrecomputeResult:
+def load_and_precompute(path: str | Path, sets: Sequence[str]) -> PrecomputeResult:
     """One scene file with ``--set`` overrides (the settings' precedence)."""
     scene = load_scene(path)
     return precompute(scene, scene.settings(overrides=parse_sets(sets)))

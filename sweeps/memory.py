@@ -52,6 +52,7 @@ def _parse_bytes(text: str) -> int:
     t = text.strip().upper().removesuffix("B")
     scale = units.get(t[-1:], 1)
     number = t[:-1] if t[-1:] in units else t
+    value: float
     try:
         value = int(number) * scale if len(number) <= 30 else -1
     except ValueError:
@@ -129,7 +130,7 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
     stacked = None if params is None else jax.tree.map(
         lambda *xs: np.stack([np.asarray(x) for x in xs]), *params)
 
-    def evaluate(b):
+    def run_bake(b):
         geometry, own, layout = shacc_jax.inputs(b, modes)
         if stacked is None:
             return run(geometry, own, layout)
@@ -142,7 +143,7 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
     S, N, T, M = baked.n_scenes, baked.n_starts, baked.n_tasks, len(modes)
     P = 1 if params is None else len(params)
     lead = 0 if params is None else 1  # a points axis before the scenes axis
-    collision = bool(np.any(baked.collision if params is None else stacked.collision))
+    collision = bool(np.any(baked.collision if stacked is None else stacked.collision))
     per_start = bytes_needed(S, 1, T, M, collision) * P
     # At least two starts in every program, even a one-start grid (padded by repeating
     # it): where an axis has length one, XLA simplifies the arithmetic around it
@@ -155,21 +156,22 @@ def evaluate_in_pieces(baked: BakedScenes, modes, evaluate=None,
                          f"than the budget of {_size(limit)}; evaluate fewer scenes at once "
                          f"or raise ${ENV}")
     if n_per >= N:
-        rollouts = jax.tree.map(np.asarray, evaluate(baked)).rollouts
+        rollouts = jax.tree.map(np.asarray, run_bake(baked)).rollouts
     else:
         pieces = []
         for a in range(0, N, n_per):
             idx = np.minimum(np.arange(a, a + n_per), N - 1)  # last piece padded: one shape
-            out = evaluate(replace(baked, starts=baked.starts[:, idx]))
+            out = run_bake(replace(baked, starts=baked.starts[:, idx]))
             keep = min(n_per, N - a)
             pieces.append([None if x is None else np.take(np.asarray(x), np.arange(keep),
                                                           axis=2 + lead)
                            for x in out.rollouts])
-        rollouts = Rollouts(*(None if parts[0] is None else
-                              np.concatenate(parts, axis=2 + lead)
-                              for parts in zip(*pieces, strict=True)))
+        # Fields that ``evaluate`` did not copy to the host stay None.
+        rollouts = Rollouts._make(None if parts[0] is None else
+                                  np.concatenate(parts, axis=2 + lead)
+                                  for parts in zip(*pieces, strict=True))
     # Metrics once, in double precision, over the joined rollouts: the same numbers
     # whether the batch ran in one piece or several (shacc_jax.metrics). ``metrics``
     # False leaves them to the caller (a sweep computes them on a CPU worker).
-    return Evaluation(rollouts, host_metrics(rollouts.outcome, rollouts.delta_R,
-                                             baked.task_mask) if metrics else None)
+    return Evaluation._make((rollouts, host_metrics(rollouts.outcome, rollouts.delta_R,
+                                                    baked.task_mask) if metrics else None))

@@ -39,7 +39,7 @@ def cmd_optimize(args) -> int:
     t1 = time.perf_counter()
     ev = evaluate_results([result], ALL_MODES)
     s = result.settings
-    found = ev.search
+    found = ev.searched()
     with human_output(args.json):
         print(f"scene: {result.scene.name}  ({result.scene.source})")
         print(f"C_init {result.C_init:.4f}   C_final {result.C_final:.4f}   Shrinking passes "
@@ -61,7 +61,7 @@ def cmd_optimize(args) -> int:
                 print("  ".join("-" * w for w in widths))
         me = ev.evaluation.metrics.u_scene[0]
         grid = dict(zip(ev.modes, me, strict=True))
-        rows = [("success on", "starts", "initial", "shrinking", "optimized"),
+        success = [("success on", "starts", "initial", "shrinking", "optimized"),
                 ("search (what it maximised)", str(s["optimize_starts"]),
                  f"{found.objective_init[0]:.3f}", f"{found.objective_shrunk[0]:.3f}",
                  f"{found.objective[0]:.3f}"),
@@ -72,14 +72,14 @@ def cmd_optimize(args) -> int:
                  f"{grid['baseline']:.3f}" if "baseline" in grid else "-",
                  f"{grid['shrinking']:.3f}" if "shrinking" in grid else "-",
                  f"{grid['optimized']:.3f}")]
-        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        widths = [max(len(r[i]) for r in success) for i in range(len(success[0]))]
         print()
-        for i, row in enumerate(rows):
+        for i, line in enumerate(success):
             print("  ".join(c.ljust(w) if j == 0 else c.rjust(w)
-                            for j, (c, w) in enumerate(zip(row, widths, strict=True))))
+                            for j, (c, w) in enumerate(zip(line, widths, strict=True))))
             if i == 0:
                 print("  ".join("-" * w for w in widths))
-        print(f"chosen: {winner_name(found.winner[0], s['optimize_candidates'])} "
+        print(f"chosen: {winner_name(int(found.winner[0]), s['optimize_candidates'])} "
               f"(selection {s['optimize_selection']}; estimated C of its spaces "
               f"{found.clutteredness[0]:.4f})")
         print(f"convergence (generation: best so far): {_convergence(found.history[0])}")

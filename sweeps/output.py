@@ -135,7 +135,7 @@ def provenance(device: bool = False) -> dict[str, Any]:
     import importlib.metadata as md
     import platform
 
-    versions = {}
+    versions: dict[str, str | None] = {}
     for name in ("shacc", "jax", "jaxlib", "numpy", "scipy", "pyarrow", "mujoco", "evosax",
                  "dask", "distributed"):
         try:

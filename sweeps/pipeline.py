@@ -12,17 +12,14 @@ import jax
 import numpy as np
 
 import shacc_jax
-from geometry_precompute import (
-    BakedScenes,
-    InputError,
-    PrecomputeResult,
-    bake,
-)
-from geometry_precompute.bake import GEOMETRY_FIELDS
+from geometry_precompute import BakedScenes, InputError, PrecomputeResult
+from geometry_precompute.bake import GEOMETRY_FIELDS, bake
 from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
 
 from . import compile_cache, memory
 from .output import precompute_json, provenance
+
+__all__ = ["Evaluated", "evaluate_results", "scene_json"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +35,13 @@ class Evaluated:
     seconds: dict
     search: Search | None = None  # the optimized mode's search (NumPy), when asked for
     provenance: dict | None = None  # software, backend, device, command line
+
+    def searched(self) -> Search:
+        """The optimized mode's search; a ValueError when the optimized mode was not
+        evaluated."""
+        if self.search is None:
+            raise ValueError("this evaluation has no optimized mode (no search ran)")
+        return self.search
 
 
 def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) -> Evaluation:
@@ -174,7 +178,7 @@ def scene_json(ev: Evaluated, s: int) -> dict:
         dr = ro.delta_R[s, m, :, :T]
         modes[mode] = {
             "success_rate": float(me.u_scene[s, m]),
-            "delta_R_mean": _none_if_nan(me.delta_R_mean[s, m]),
+            "delta_R_mean": _none_if_nan(float(me.delta_R_mean[s, m])),
             "outcome": [[OUTCOMES[c] for c in row] for row in code.tolist()],
             "activated": [[ids[a] if a >= 0 else None for a in row] for row in act.tolist()],
             "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
@@ -203,7 +207,7 @@ def tasks_json(ev: Evaluated, s: int) -> list[dict]:
     and outcome counts."""
     r = ev.results[s]
     T = len(r.spaces)
-    per_mode = {mode: task_counts(ev.evaluation.rollouts.outcome[s, m, :, :T])
+    per_mode = {mode: task_counts(np.asarray(ev.evaluation.rollouts.outcome[s, m, :, :T]))
                 for m, mode in enumerate(ev.modes)}
     out = []
     for t, (task, sp) in enumerate(zip(r.scene.tasks, r.spaces, strict=True)):
@@ -226,8 +230,8 @@ def tasks_json(ev: Evaluated, s: int) -> list[dict]:
 
 def optimized_params(ev: Evaluated, s: int) -> dict[str, dict[str, float]]:
     """The search's parameters of scene ``s``, per task id and parameter name."""
-    r = ev.results[s]
-    return {sp.task.id: {n: float(ev.search.q[s, t, k]) for k, n in enumerate(sp.param_names)}
+    r, q = ev.results[s], ev.searched().q
+    return {sp.task.id: {n: float(q[s, t, k]) for k, n in enumerate(sp.param_names)}
             for t, sp in enumerate(r.spaces)}
 
 
@@ -238,11 +242,11 @@ def optimize_json(ev: Evaluated, s: int) -> dict:
     won."""
     from shacc_jax.optimize import winner_name
 
-    f, st = ev.search, ev.results[s].settings
+    f, st = ev.searched(), ev.results[s].settings
     held = {m: float(ev.evaluation.metrics.u_scene[s, i]) for i, m in enumerate(ev.modes)}
     return {
         "params": optimized_params(ev, s),
-        "chosen": winner_name(f.winner[s], st["optimize_candidates"]),
+        "chosen": winner_name(int(f.winner[s]), st["optimize_candidates"]),
         "success": {
             "search": {"init": float(f.objective_init[s]),
                        "shrinking": float(f.objective_shrunk[s]),

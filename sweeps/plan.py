@@ -63,7 +63,7 @@ def point_groups(cfg: SweepConfig) -> list[tuple[int, ...]]:
 
 def plan(cfg: SweepConfig) -> list[Chunk]:
     n = cfg.n_scenes()
-    out = []
+    out: list[Chunk] = []
     for points in point_groups(cfg):
         for start in range(0, n, cfg.chunk):
             out.append(Chunk(len(out), points, range(start, min(start + cfg.chunk, n))))

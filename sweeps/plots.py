@@ -6,6 +6,7 @@ function returns the Figure and can save it."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -15,6 +16,10 @@ from scipy.spatial import ConvexHull
 MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c",
                "optimized": "#9467bd"}
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
+
+__all__ = ["MODE_COLORS", "OUTCOME_COLORS", "category_bars", "correlation_panels",
+           "scene_gallery", "scene_top_view", "space_shadows_yz", "success_fields",
+           "success_fields_with_spaces", "sweep_heatmap", "sweep_lines", "swept_axes"]
 
 
 def _figure(ax, n: int = 1, figsize=(4.8, 3.4), **kw):
@@ -48,7 +53,22 @@ def _save(fig, path):
 def correlation_panels(u: np.ndarray, measures: dict, correlations: dict, path=None,
                        ax=None):
     """Fig. 6a: baseline u_scene against each measure, with a least-squares line and
-    rho with its bootstrap CI in the title. ``ax``: one Axes per measure."""
+    rho with its bootstrap CI in the title. ``ax``: one Axes per measure.
+
+    :param u: (S,) baseline success per scene.
+    :param measures: name -> (S,) values per scene (C_init, d, h).
+    :param correlations: name -> :func:`sweeps.stats.pearson_ci`'s dict.
+    :param path: where to save the figure (PNG unless the suffix says otherwise).
+
+    Example::
+
+        >>> from sweeps.plots import correlation_panels
+        >>> from sweeps.stats import pearson_ci
+        >>> u, c = [0.9, 0.8, 0.5, 0.3], [0.0, 0.1, 0.3, 0.5]
+        >>> fig = correlation_panels(u, {"C_init": c}, {"C_init": pearson_ci(c, u)})
+        >>> len(fig.axes)
+        1
+    """
     fig, axes = _figure(ax, len(measures), (4.2 * len(measures), 3.6), sharey=True)
     for a, (name, x) in zip(axes, measures.items(), strict=True):
         x = np.asarray(x, float)
@@ -73,12 +93,27 @@ def correlation_panels(u: np.ndarray, measures: dict, correlations: dict, path=N
 
 def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None,
                   ylabel: str | None = None, ax=None):
-    """Fig. 6b-d: per category and mode, the mean of ``metric`` with CI error bars."""
+    """Fig. 6b-d: per category and mode, the mean of ``metric`` with CI error bars.
+
+    :param categories: category -> {"n_scenes": n, mode: {metric: {"mean": m, "ci":
+        [lo, hi]}}} (``shacc reproduce``'s ``summary.json`` holds this shape; categories
+        with no scenes are left out).
+    :param metric: the key under each mode (``"u_scene"``, ``"C_final"``, ...).
+
+    Example::
+
+        >>> from sweeps.plots import category_bars
+        >>> cats = {"cluttered": {"n_scenes": 6,
+        ...                       "baseline": {"u_scene": {"mean": 0.5, "ci": [0.4, 0.6]}},
+        ...                       "shacc": {"u_scene": {"mean": 0.8, "ci": [0.7, 0.9]}}}}
+        >>> fig = category_bars(cats, "u_scene", ["baseline", "shacc"], ylabel="success")
+    """
     names = [c for c in categories if categories[c]["n_scenes"] > 0]
     fig, (a,) = _figure(ax, 1, (1.6 * len(names) + 2, 3.4))
     width = 0.8 / len(modes)
     for k, mode in enumerate(modes):
-        means, errs = [], [[], []]
+        means: list[float] = []
+        errs: list[list[float]] = [[], []]
         for c in names:
             entry = categories[c][mode][metric]
             m = entry["mean"] if entry["mean"] is not None else np.nan
@@ -103,7 +138,21 @@ def success_fields(outcome: np.ndarray, grid: tuple[int, int], y_range, z_range,
                    title: str | None = None, ax=None):
     """Fig. 7: per task (columns) and mode (rows), the outcome of the rollout from each
     start of the grid. ``outcome`` is (modes, starts, tasks) with starts y-major.
-    ``ax``: modes x tasks Axes (row by row)."""
+    ``ax``: modes x tasks Axes (row by row).
+
+    :param outcome: (M, N, T) outcome codes (``shacc_jax.OUTCOMES``), N = ny * nz.
+    :param grid: (ny, nz), the start grid; ``y_range``, ``z_range``: its extent (m).
+
+    Example::
+
+        >>> import numpy as np
+        >>> from sweeps.plots import success_fields
+        >>> outcome = np.zeros((2, 6 * 6, 3), int)         # every rollout a success
+        >>> fig = success_fields(outcome, (6, 6), (-0.4, 0.4), (0.05, 0.4),
+        ...                      ["a", "b", "c"], ["baseline", "shacc"])
+        >>> len(fig.axes)
+        6
+    """
     ny, nz = grid
     M, _, T = outcome.shape
     if ax is None:
@@ -154,7 +203,7 @@ def _outline_xy(shape) -> np.ndarray:
     return (local @ rot.T + center)[:, :2]
 
 
-SPACE_STYLE = {  # how a top view and its legend draw each kind of space
+SPACE_STYLE: dict[str, dict[str, Any]] = {  # how a top view and its legend draw each kind of space
     "init": {"color": "#d62728", "lw": 1.0, "ls": "-", "label": "initial space"},
     "shrinking": {"color": "#1f77b4", "lw": 1.3, "ls": "-", "label": "after Shrinking"},
     "optimized": {"color": "#9467bd", "lw": 1.5, "ls": "--", "label": "optimized"},
@@ -223,7 +272,19 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
     with its meta-skill cluster (``K0``, ...) when it has one; the start plane; a legend.
     ``rollout``: ``(start xyz, end xyz, outcome name, label)`` drawn as a line from the
     start to where the rollout ended. ``success``: mode -> success rate, in the title.
-    Labels are placed so that none covers another (:func:`_place_labels`)."""
+    Labels are placed so that none covers another (:func:`_place_labels`).
+
+    :param result: a ``geometry_precompute.PrecomputeResult``.
+
+    Example::
+
+        >>> from geometry_precompute import load_scene, precompute, shipped_scene_paths
+        >>> r = precompute(load_scene(shipped_scene_paths()[8]))   # mug behind two
+        >>> fig = scene_top_view(r, success={"baseline": 0.61, "shacc": 0.94})
+        >>> fig.axes[0].get_xlabel()
+        'x (m)'
+    """
+    from matplotlib.artist import Artist
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -252,7 +313,7 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
         ring = _outline_xy(object_body(o))
         extent.append(ring)
         ax.fill(ring[:, 0], ring[:, 1], color="k", alpha=0.6, zorder=3)
-    handles = [Patch(fc=SPACE_STYLE["init"]["color"], alpha=0.35,
+    handles: list[Artist] = [Patch(fc=SPACE_STYLE["init"]["color"], alpha=0.35,
                      ec=SPACE_STYLE["init"]["color"], label=SPACE_STYLE["init"]["label"])]
     handles += [Line2D([], [], color=SPACE_STYLE[k]["color"], lw=SPACE_STYLE[k]["lw"],
                        ls=SPACE_STYLE[k]["ls"], label=SPACE_STYLE[k]["label"])
@@ -293,7 +354,7 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
     if own:
         fig.tight_layout()
     # Object ids on the objects, then task ids beside their spaces, none covering another.
-    renderer = fig.canvas.get_renderer()
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]  # Agg's
     ax.apply_aspect()
     avoid = []
     for o in result.scene.objects:
@@ -340,7 +401,19 @@ def _outcome_index(name: str) -> int:
 
 def space_shadows_yz(shapes, sections: int = 32) -> list[np.ndarray]:
     """Each space's outline seen from the start plane (its projection onto y-z): the
-    convex hull of its mesh vertices, as closed polylines."""
+    convex hull of its mesh vertices, as closed polylines.
+
+    :param shapes: task spaces (``PrecomputeResult.shapes_init`` or ``shapes_opt``).
+    :returns: one (k, 2) array of (y, z) in m per space, its first point repeated last.
+
+    Example::
+
+        >>> from geometry_precompute import load_scene, precompute, shipped_scene_paths
+        >>> r = precompute(load_scene(shipped_scene_paths()[8]))   # mug behind two
+        >>> rings = space_shadows_yz(r.shapes_init)
+        >>> len(rings) == len(r.spaces), rings[0].shape[1]
+        (True, 2)
+    """
     from geometry_precompute.meshes import shape_trimesh
 
     out = []
@@ -356,7 +429,20 @@ def success_fields_with_spaces(outcome: np.ndarray, delta_r: np.ndarray, grid, y
     """Fig. 7 with more: per task (columns) the outcome field of each mode (rows, outcome
     kinds coloured), the initial (red) and optimised (blue) spaces seen from the start
     plane, and a last row with ShaCC's delta_R field over its successes. ``ax``:
-    (modes + 1) x tasks Axes (row by row)."""
+    (modes + 1) x tasks Axes (row by row).
+
+    :param outcome: (M, N, T) outcome codes; ``delta_r``: (N, T) ShaCC's delta_R (rad).
+    :param result: the scene's ``PrecomputeResult`` (its spaces are drawn).
+
+    Example::
+
+        >>> import numpy as np
+        >>> from geometry_precompute import load_scene, precompute, shipped_scene_paths
+        >>> r = precompute(load_scene(shipped_scene_paths()[8]))   # mug behind two
+        >>> T = len(r.spaces)
+        >>> fig = success_fields_with_spaces(np.zeros((1, 16, T), int), np.zeros((16, T)),
+        ...                                  (4, 4), (-0.4, 0.4), (0.05, 0.4), r, ["shacc"])
+    """
     ny, nz = grid
     M, _, T = outcome.shape
     if ax is None:
@@ -398,12 +484,21 @@ def success_fields_with_spaces(outcome: np.ndarray, delta_r: np.ndarray, grid, y
 
 def scene_gallery(results, columns: int = 4, path=None, ax=None):
     """Top-down views of several scenes (initial red, optimised blue, clusters).
-    ``ax``: one Axes per scene."""
+    ``ax``: one Axes per scene.
+
+    :param results: ``PrecomputeResult``s, drawn ``columns`` to a row.
+
+    Example::
+
+        >>> from geometry_precompute import load_scene, precompute, shipped_scene_paths
+        >>> results = [precompute(load_scene(p)) for p in shipped_scene_paths()[:2]]
+        >>> fig = scene_gallery(results, columns=2)
+    """
     if ax is None:
         rows = -(-len(results) // columns)
-        fig, axes = plt.subplots(rows, columns, figsize=(3.3 * columns, 3.4 * rows),
+        fig, grid = plt.subplots(rows, columns, figsize=(3.3 * columns, 3.4 * rows),
                                  squeeze=False)
-        axes = list(axes.ravel())
+        axes = list(grid.ravel())
     else:
         fig, axes = _figure(ax, len(results))
     for a, r in zip(axes, results, strict=False):
@@ -417,7 +512,18 @@ def scene_gallery(results, columns: int = 4, path=None, ax=None):
 
 def swept_axes(scenes_df, exclude: Sequence[str] = ()) -> list[str]:
     """The settings a sweep's scenes table varies (``set.NAME`` columns with more than
-    one value), by name."""
+    one value), by name.
+
+    :param scenes_df: a sweep's ``scenes`` table as a pandas DataFrame.
+    :param exclude: setting names to leave out.
+
+    Example::
+
+        >>> import pandas as pd
+        >>> df = pd.DataFrame({"set.v_max": [0.5, 1.0], "set.dt": [0.02, 0.02]})
+        >>> swept_axes(df)
+        ['v_max']
+    """
     out = []
     for col in scenes_df.columns:
         if col.startswith("set.") and col[4:] not in exclude:
@@ -445,7 +551,21 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     "lines"`` each combination of their values is a line of its own (colour per mode,
     line style per combination); with ``"marginalise"`` one line per mode averages each
     scene over the other settings first and resamples the scenes as clusters, which
-    the title says. Both give scene-level intervals."""
+    the title says. Both give scene-level intervals.
+
+    :param scenes_df: a sweep's ``scenes`` table (``scene_index``, ``set.<axis>`` and
+        ``<mode>.<metric>`` columns), one row per scene and point.
+
+    Example::
+
+        >>> import pandas as pd
+        >>> df = pd.DataFrame({"scene_index": [0, 1, 2, 0, 1, 2],
+        ...                    "set.v_max": [0.5, 0.5, 0.5, 1.0, 1.0, 1.0],
+        ...                    "shacc.success": [0.9, 0.8, 0.7, 0.8, 0.6, 0.7]})
+        >>> fig = sweep_lines(df, "v_max", "success", ["shacc"], n_resamples=200)
+        >>> fig.axes[0].get_xlabel()
+        'v_max'
+    """
     from .stats import group_means
 
     col = f"set.{axis}"
@@ -491,7 +611,21 @@ def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, p
                   ax=None):
     """Mean ``metric`` of ``mode`` over scenes at each point of a two-axis sweep (each
     cell one point: its own scenes). Other swept settings must be fixed first (a
-    table with repeated scenes in a cell is refused)."""
+    table with repeated scenes in a cell is refused).
+
+    :param scenes_df: a sweep's ``scenes`` table; ``axis_x``, ``axis_y``: setting names.
+
+    Example::
+
+        >>> import pandas as pd
+        >>> df = pd.DataFrame({"scene_index": [0, 0, 0, 0],
+        ...                    "set.v_max": [0.5, 1.0, 0.5, 1.0],
+        ...                    "set.dt": [0.01, 0.01, 0.02, 0.02],
+        ...                    "shacc.success": [0.9, 0.8, 0.8, 0.7]})
+        >>> fig = sweep_heatmap(df, "v_max", "dt", "success", "shacc")
+        >>> fig.axes[0].get_title()
+        'shacc: success'
+    """
     df = scenes_df.copy()
     for a_ in (axis_x, axis_y):
         df[a_] = df[f"set.{a_}"].map(lambda v: float(v) if _is_number(v) else _label(v))

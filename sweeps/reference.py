@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from geometry_precompute.settings import describe
@@ -44,9 +46,9 @@ def columns_table(table: str) -> str:
     return "\n".join(rows)
 
 
-BLOCKS = {
+BLOCKS: dict[str, dict[str, Callable[[], str]]] = {
     "settings.md": {"settings": settings_table},
-    "outputs.md": {f"columns-{t}": (lambda t=t: columns_table(t)) for t in COLUMNS},
+    "outputs.md": {f"columns-{t}": partial(columns_table, t) for t in COLUMNS},
 }
 
 _BLOCK = re.compile(r"(<!-- generated: (?P<name>[\w-]+) -->\n)(?:|.*?\n)(<!-- end generated -->)",

@@ -129,6 +129,8 @@ def rollout_path(ev, mode: str, start: int, task: str | int, s: int = 0) -> Roll
     (:func:`sweeps.pipeline.evaluate_results`, ``mode`` among its modes): where it
     started and ended, its outcome, and the gripper's capsules there
     (``collision.gripper_geoms``, sized by the scene's ``gripper.*`` settings)."""
+    import jax.numpy as jnp
+
     from geometry_precompute.schema import OUTCOMES
     from shacc_jax.collision import gripper_geoms
 
@@ -142,8 +144,8 @@ def rollout_path(ev, mode: str, start: int, task: str | int, s: int = 0) -> Roll
     b, ro = ev.baked, ev.evaluation.rollouts
     points = np.stack([b.starts[s, start, :3], ro.point[s, m, start, t]]).astype(float)
     quats = np.stack([b.starts[s, start, 3:], ro.orientation[s, m, start, t]]).astype(float)
-    dims = np.array([b.gripper_finger_length[s], b.gripper_finger_radius[s],
-                     b.gripper_opening[s], b.gripper_palm_radius[s]], np.float32)
+    dims = jnp.array([b.gripper_finger_length[s], b.gripper_finger_radius[s],
+                      b.gripper_opening[s], b.gripper_palm_radius[s]], np.float32)
     capsules = [tuple(np.asarray(a, float) for a in gripper_geoms(p, q, dims))
                 for p, q in zip(points.astype(np.float32), quats.astype(np.float32),
                                 strict=True)]

@@ -23,6 +23,7 @@ import html
 import io
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -150,7 +151,8 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     rows = []
     point_cols = [c for c in scenes.columns if c.startswith("set.")]
     first = scenes.drop_duplicates("point").set_index("point")
-    bars = {}  # the same success intervals, drawn below when there are few points
+    # The same success intervals, drawn below when there are few points.
+    bars: dict[str, dict[str, Any]] = {}
     for p, g in scenes.groupby("point", sort=True):
         label = ", ".join(f"{c[4:]}={plots._label(first.loc[p, c])}" for c in point_cols
                           if c[4:] in axes) or "-"

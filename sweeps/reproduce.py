@@ -22,6 +22,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -35,6 +36,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from shacc_jax.optimize import winner_name
+from shacc_jax.types import Search
 
 from . import claims, plots
 from .inputs import parse_sets
@@ -51,7 +53,7 @@ README_END = "<!-- reproduce:end -->"
 
 
 def _software() -> dict:
-    out = {"python": platform.python_version()}
+    out: dict[str, str | None] = {"python": platform.python_version()}
     for name in ("jax", "jaxlib", "numpy", "scipy", "trimesh", "manifold3d", "coal", "shacc"):
         try:
             out[name] = md.version(name)
@@ -91,7 +93,8 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     # scenes (geometry_precompute/generate.py); ``compact`` is the earlier geometry.
     randoms = [(seed + i, "uniform" if i % 2 == 0 else "gaussian", preset)
                for i in range(n_random)]
-    items = [("manual", p, dict(overrides or {})) for p in manual]
+    items: list[tuple[str, Path | tuple[int, str, str], dict]] = [
+        ("manual", p, dict(overrides or {})) for p in manual]
     items += [("random", r, dict(overrides or {})) for r in randoms]
     _log(f"reproduce: {len(manual)} manual + {n_random} random scenes ({preset} preset), modes "
           f"{', '.join(MODES)}")
@@ -108,6 +111,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     _log(f"  {n_rollouts} rollouts in {ev.seconds['evaluate']:.1f} s")
 
     scenes = []
+    found = ev.searched()
     for i, r in enumerate(results):
         is_manual = i < len(manual)
         cat = ("uncluttered" if r.C_init == 0 else "cluttered") if is_manual else randoms[
@@ -115,14 +119,14 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         entry = {"name": r.scene.name, "set": "manual" if is_manual else "random",
                  "category": cat, "n_tasks": len(r.spaces), "C_init": r.C_init,
                  "C_final": r.C_final, "d": r.d, "h": r.h,
-                 "C_optimized": _optimized_clutteredness(r, ev.search.q[i]),
-                 "search_objective": {k: float(getattr(ev.search, f)[i]) for k, f in (
+                 "C_optimized": _optimized_clutteredness(r, np.asarray(found.q[i])),
+                 "search_objective": {k: float(getattr(found, f)[i]) for k, f in (
                      ("init", "objective_init"), ("shrinking", "objective_shrunk"),
                      ("optimized", "objective"))},
-                 "validation": {k: float(getattr(ev.search, f)[i]) for k, f in (
+                 "validation": {k: float(getattr(found, f)[i]) for k, f in (
                      ("init", "validation_init"), ("shrinking", "validation_shrunk"),
                      ("optimized", "validation"))},
-                 "chosen": winner_name(ev.search.winner[i], r.settings["optimize_candidates"]),
+                 "chosen": winner_name(int(found.winner[i]), r.settings["optimize_candidates"]),
                  "rollouts_per_mode": int(me.n_rollouts[i, 0])}
         for m, mode in enumerate(MODES):
             dr = me.delta_R_mean[i, m]
@@ -178,14 +182,14 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     field_settings = fr.settings.with_overrides({"start_grid": [field_grid, field_grid]})
     # The optimized spaces of the tables (the search is not run again for the field).
     T = len(fr.spaces)
-    field_search = type(ev.search)(*(a[field_idx:field_idx + 1, :T] if a.ndim == 3
-                                     else a[field_idx:field_idx + 1] for a in ev.search))
+    field_search = Search._make(a[field_idx:field_idx + 1, :T] if a.ndim == 3
+                                else a[field_idx:field_idx + 1] for a in found)
     field = evaluate_results([precompute(fr.scene, field_settings)],
                              ("baseline", "shrinking", "shacc", "optimized"),
                              found=field_search)
     t_field = time.perf_counter()
 
-    summary = {
+    summary: dict[str, Any] = {
         "correlation": correlation,
         "categories": categories,
         "scenes": scenes,

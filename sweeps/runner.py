@@ -30,6 +30,7 @@ import time
 import uuid
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -41,6 +42,8 @@ from . import tables
 from .config import SweepConfig
 from .output import check_output_dir, provenance, write_atomic, write_json
 from .plan import Chunk, bucket, plan, point_groups, precompute_batches, shapes
+
+__all__ = ["run_sweep"]
 
 # For --dry-run's time estimate, all measured (benchmarks/RESULTS.md): rollouts per
 # second (random 10-task scenes: 2 CPU cores 1.4e5, one H100 9.2e7); precompute per task
@@ -322,7 +325,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
               lookahead * pool.precompute_threads)
     busy = dict.fromkeys(("precompute", "warm_up", "join", "evaluate", "tables", "write"),
                          0.0)
-    totals = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
+    totals: dict[str, Any] = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
               "compilations": 0, "programs_loaded": 0, "warmed_up_with_the_process": 0}
     bar_opts = {"disable": None if progress else True, "file": sys.stderr, "smoothing": 0.1}
     scenes_bar = tqdm(total=sum(len(c.scenes) for c in todo), unit="scene",

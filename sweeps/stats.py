@@ -29,6 +29,9 @@ from scipy import stats
 
 LEVEL = 0.95
 
+__all__ = ["LEVEL", "cluster_mean_ci", "group_means", "mean_ci", "paired_diff_ci",
+           "partial_corr_ci", "pearson_ci", "pooled_rows_ci", "relative_change_ci"]
+
 
 def _ci(res) -> list[float] | None:
     lo, hi = res.confidence_interval
@@ -54,7 +57,21 @@ def mean_ci(values, n_resamples: int = 10_000, seed: int = 0,
             level: float = LEVEL) -> dict:
     """{"mean": m, "ci": [lo, hi], "n": n} over the finite values, one per scene (NaN
     = a scene with no value, e.g. no success); mean None for no values, ci None for
-    fewer than two."""
+    fewer than two.
+
+    :param values: (S,) one value per scene (a success rate, an angle in rad, ...).
+    :param n_resamples: bootstrap resamples; ``seed`` seeds them; ``level`` is the
+        interval's coverage (0.95).
+
+    Example::
+
+        >>> from sweeps.stats import mean_ci
+        >>> r = mean_ci([0.5, 0.75, 1.0, 0.25, float("nan")], seed=0)
+        >>> r["mean"], r["n"]            # the NaN scene is left out
+        (0.625, 4)
+        >>> r["ci"][0] <= r["mean"] <= r["ci"][1]
+        True
+    """
     x = np.asarray(values, dtype=np.float64)
     x = x[np.isfinite(x)]
     if x.size == 0:
@@ -70,7 +87,19 @@ def paired_diff_ci(a, b, n_resamples: int = 10_000, seed: int = 0,
                    level: float = LEVEL) -> dict:
     """The mean over scenes of b - a, two measurements of the same scenes (two modes, two
     sweep points, two runs), with a CI resampling the scenes' differences. Scenes where
-    either value is missing are left out (``n`` counts the rest)."""
+    either value is missing are left out (``n`` counts the rest).
+
+    :param a: (S,) the first measurement per scene (e.g. baseline success).
+    :param b: (S,) the second, same scenes in the same order (e.g. shacc success).
+    :returns: as :func:`mean_ci`, of b - a.
+
+    Example::
+
+        >>> from sweeps.stats import paired_diff_ci
+        >>> d = paired_diff_ci([0.2, 0.5, 0.4, 0.6], [0.5, 0.7, 0.6, 0.9], seed=0)
+        >>> round(d["mean"], 3), d["ci"][0] > 0     # B better than A, and surely so
+        (0.25, True)
+    """
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     if a.shape != b.shape:
         raise ValueError(f"paired values need one shape, got {a.shape} and {b.shape}")
@@ -81,7 +110,18 @@ def paired_diff_ci(a, b, n_resamples: int = 10_000, seed: int = 0,
 def relative_change_ci(a, b, n_resamples: int = 10_000, seed: int = 0,
                        level: float = LEVEL) -> dict:
     """mean(b) / mean(a) - 1 over the same scenes (the paper's "+45 %"), with a paired
-    CI resampling scenes. None where mean(a) is zero."""
+    CI resampling scenes. None where mean(a) is zero.
+
+    :param a: (S,) the reference measurement per scene; ``b`` (S,) the same scenes'
+        other one. The result's ``mean`` is a fraction (0.45 for +45 %).
+
+    Example::
+
+        >>> from sweeps.stats import relative_change_ci
+        >>> r = relative_change_ci([0.4, 0.5, 0.6], [0.6, 0.7, 0.9], seed=0)
+        >>> round(r["mean"], 3), r["n"]
+        (0.467, 3)
+    """
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     keep = np.isfinite(a) & np.isfinite(b)
     a, b = a[keep], b[keep]
@@ -104,7 +144,18 @@ def cluster_mean_ci(values, scenes, n_resamples: int = 10_000, seed: int = 0,
     """The mean of rows that belong to scenes (several rows per scene: the points of a
     marginalised sweep axis), as the mean of each scene's own mean, with a CI that
     resamples scenes as clusters. Every scene weighs the same, however many rows it
-    has."""
+    has.
+
+    :param values: (R,) one value per row; ``scenes`` (R,) the scene each row belongs to
+        (any hashable labels).
+
+    Example::
+
+        >>> from sweeps.stats import cluster_mean_ci
+        >>> r = cluster_mean_ci([0.2, 0.4, 0.9, 0.8, 0.7], ["a", "a", "b", "b", "b"], seed=0)
+        >>> round(r["mean"], 3), r["n"]    # (0.3 + 0.8) / 2 over two scenes
+        (0.55, 2)
+    """
     values = np.asarray(values, np.float64)
     scenes = np.asarray(scenes)
     keep = np.isfinite(values)
@@ -119,14 +170,33 @@ def cluster_mean_ci(values, scenes, n_resamples: int = 10_000, seed: int = 0,
 def pooled_rows_ci(values, n_resamples: int = 10_000, seed: int = 0,
                    level: float = LEVEL) -> dict:
     """The wrong interval, kept for the tests that show it is wrong: every row
-    resampled as if it were an independent scene."""
+    resampled as if it were an independent scene. Use :func:`cluster_mean_ci` instead.
+
+    :param values: (R,) one value per row, rows of the same scene counted as others.
+
+    Example::
+
+        >>> from sweeps.stats import pooled_rows_ci
+        >>> pooled_rows_ci([0.2, 0.4, 0.9, 0.8, 0.7], seed=0)["n"]   # rows, not scenes
+        5
+    """
     return mean_ci(values, n_resamples, seed, level)
 
 
 def pearson_ci(x, y, n_resamples: int = 10_000, seed: int = 0, level: float = LEVEL) -> dict:
     """{"rho": r, "ci": [lo, hi], "p": p}: Pearson's rho (scipy.stats.pearsonr) with a
     paired percentile-bootstrap CI, resampling scenes. None where rho is undefined
-    (fewer than three scenes, or a constant measure)."""
+    (fewer than three scenes, or a constant measure).
+
+    :param x: (S,) one measure per scene (e.g. C_init); ``y`` (S,) another (success).
+
+    Example::
+
+        >>> from sweeps.stats import pearson_ci
+        >>> r = pearson_ci([0.0, 0.1, 0.3, 0.5], [0.9, 0.8, 0.5, 0.3], seed=0)
+        >>> r["rho"] < -0.9, r["p"] < 0.05
+        (True, True)
+    """
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     if x.size < 3 or np.all(x == x[0]) or np.all(y == y[0]):
@@ -159,7 +229,20 @@ def partial_corr_ci(x, y, z, n_resamples: int = 10_000, seed: int = 0,
     """{"rho": r, "ci": [lo, hi]}: the partial correlation of x and y controlling for z
     (e.g. baseline success and C_init, controlling for the task count), with a paired
     bootstrap CI over scenes. None where undefined (fewer than four scenes, a constant
-    measure, or x or y a linear function of z)."""
+    measure, or x or y a linear function of z).
+
+    :param x: (S,), ``y`` (S,), ``z`` (S,): three measures of the same scenes.
+
+    Example::
+
+        >>> from sweeps.stats import partial_corr_ci
+        >>> c = [0.0, 0.1, 0.3, 0.5, 0.2]
+        >>> u = [0.9, 0.8, 0.5, 0.3, 0.6]
+        >>> tasks = [3, 4, 2, 5, 3]
+        >>> r = partial_corr_ci(c, u, tasks, seed=0)
+        >>> -1 <= r["rho"] <= 1
+        True
+    """
     x, y, z = (np.asarray(v, np.float64) for v in (x, y, z))
     if x.size < 4 or any(np.all(v == v[0]) for v in (x, y, z)):
         return {"rho": None, "ci": None}
@@ -176,7 +259,25 @@ def group_means(df, by: list[str], column: str, n_resamples: int = 2000, seed: i
     its CI. Columns in ``marginalise`` (other sweep axes) are averaged within each
     scene first and the scenes resampled as clusters (:func:`cluster_mean_ci`); without
     them every row of a group must be a distinct scene (one sweep point), which this
-    checks."""
+    checks.
+
+    :param df: a pandas DataFrame, one row per scene and sweep point (the sweep's
+        ``scenes`` table).
+    :param by: the columns to group by (e.g. ``["point"]`` or ``["set.v_max"]``).
+    :param column: the measure (e.g. ``"shacc.success"``).
+    :param scene: the column naming the scene (``scene_index`` in a sweep).
+    :returns: one dict per group: the ``by`` values and :func:`mean_ci`'s keys.
+
+    Example::
+
+        >>> import pandas as pd
+        >>> from sweeps.stats import group_means
+        >>> df = pd.DataFrame({"point": [0, 0, 1, 1], "scene_index": [0, 1, 0, 1],
+        ...                    "shacc.success": [0.5, 0.7, 0.6, 0.9]})
+        >>> [(g["point"], round(g["mean"], 3)) for g in group_means(df, ["point"],
+        ...                                                         "shacc.success")]
+        [(0, 0.6), (1, 0.75)]
+    """
     out = []
     for key, g in df.groupby(by, sort=True, dropna=False):
         key = key if isinstance(key, tuple) else (key,)

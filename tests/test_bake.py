@@ -40,6 +40,34 @@ def test_bake_arrays_follow_the_schema(shipped_results):
     assert set(b.obj_kind[b.obj_mask]) <= {schema.CYLINDER, schema.BOX}
 
 
+def test_the_typed_classes_mirror_the_schema():
+    """BakedScenes, Geometry, Params and SearchProblem are written out field by field
+    (so editors and type checkers see them); their fields are the schema's, in its
+    order, and each annotation names the schema's dtype and axes (Params with a leading
+    ``*P`` of sweep points)."""
+    import dataclasses
+    import re
+
+    from geometry_precompute.bake import BakedScenes
+    from shacc_jax.types import Geometry, Params, SearchProblem
+
+    fields = schema.GEOMETRY + schema.PARAMS + schema.SEARCH
+    assert [f.name for f in dataclasses.fields(BakedScenes)] == \
+        [f.name for f in fields] + ["labels"]
+    wrapper = {"bool": "Bool", "int": "Int", "float": "Float"}
+    for cls, group, lead in ((Geometry, schema.GEOMETRY, ""), (Params, schema.PARAMS, "*P"),
+                             (SearchProblem, schema.SEARCH, "")):
+        assert cls._fields == schema.names(group), cls.__name__
+        for f in group:
+            hint = cls.__annotations__[f.name]  # a string, or a ForwardRef holding one
+            hint = getattr(hint, "__forward_arg__", hint)
+            m = re.fullmatch(r"(\w+)\[Array, ['\"]([^'\"]*)['\"]\]", hint)
+            assert m, (cls.__name__, f.name, hint)
+            axes = " ".join(str(a) for a in f.shape)
+            assert (m[1], m[2].strip()) == (wrapper[f.dtype], f"{lead} {axes}".strip()), \
+                (cls.__name__, f.name)
+
+
 def test_layout_is_read_off_the_bake_once(shipped_results):
     """Layout: padded sizes, the modes, and the meta formula from the baked flags; it
     is hashable (a static argument) and refuses what it cannot mean."""
