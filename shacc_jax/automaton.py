@@ -63,7 +63,7 @@ def straight_path(spaces: shapes.Prepared, target: Int[Array, ""], p0: Float[Arr
     diff = c0 - p0
     length = shapes._safe_norm(diff)
     u = jnp.where(length > 0, diff / jnp.where(length > 0, length, 1.0), 0.0)
-    landing = jnp.minimum(jnp.ceil(length / step_length), max_steps + 1.0)
+    landing = jnp.minimum(jnp.ceil(length / step_length), max_steps.astype(length.dtype) + 1.0)
     return Path(p0, c0, u, length, landing, step_length)
 
 
@@ -80,7 +80,7 @@ def first_sample(lo: Array, hi: Array, kmin: Array, path: Path, max_steps: Array
     on_segment = (k1 < path.landing) & (k1 * path.step_length <= hi)
     at_end = (kmin <= path.landing) & (lo <= path.length) & (path.length <= hi)
     cand = jnp.where(on_segment, k1, jnp.where(at_end, path.landing, inf))
-    return jnp.where(cand <= max_steps, cand, inf)
+    return jnp.where(cand <= max_steps.astype(cand.dtype), cand, inf)
 
 
 def last_sample(lo: Array, hi: Array, path: Path, max_steps: Array) -> Array:
@@ -107,11 +107,12 @@ def first_activation(spaces: shapes.Prepared, mask: Bool[Array, " T"], path: Pat
     lo = jnp.where(mask, lo, inf)
     hi = jnp.where(mask, hi, -inf)
     T = mask.shape[0]
+    steps = max_steps.astype(lo.dtype)
 
     def body(carry):
         kmin, _, _, _, _ = carry
         # The landing sample K lies on the target's own space: always a candidate.
-        landing = jnp.where((kmin <= path.landing) & (path.landing <= max_steps),
+        landing = jnp.where((kmin <= path.landing) & (path.landing <= steps),
                             path.landing, inf)
         k = jnp.minimum(jnp.min(first_sample(lo, hi, kmin, path, max_steps)), landing)
         none = ~jnp.isfinite(k)

@@ -447,7 +447,8 @@ def path_window(bounds: Bounds, obj_center, obj_mask, gripper: Float[Array, "4"]
     # Pairs (capsules, objects): t u within rho of the parallelogram of axis offsets.
     c0 = start[None, :, :] - (g_pos - axis)[:, None, :]
     rho = g_size[:, 0:1] + radius[None, :] + CULL_MARGIN
-    lo, hi = _line_rounded_parallelogram(path.u, c0, jnp.broadcast_to(extent, c0.shape),
+    lo, hi = _line_rounded_parallelogram(jnp.broadcast_to(path.u, c0.shape), c0,
+                                         jnp.broadcast_to(extent, c0.shape),
                                          jnp.broadcast_to(-2.0 * axis[:, None, :], c0.shape),
                                          rho)
     lo, hi = jnp.where(obj_mask[None, :], lo, inf), jnp.where(obj_mask[None, :], hi, -inf)
@@ -459,10 +460,12 @@ def path_window(bounds: Bounds, obj_center, obj_mask, gripper: Float[Array, "4"]
     last = jnp.where(jnp.isfinite(first), last, -inf)
     # From turn_from on: bounding spheres.
     reach = gripper_reach(gripper) + sphere + CULL_MARGIN
-    s_lo, s_hi = _line_sphere(path.u, obj_center - path.p0, reach)
+    offsets = obj_center - path.p0[None]
+    s_lo, s_hi = _line_sphere(jnp.broadcast_to(path.u, offsets.shape), offsets, reach)
     s_lo, s_hi = jnp.where(obj_mask, s_lo, inf), jnp.where(obj_mask, s_hi, -inf)
     kmin = jnp.where(jnp.isfinite(turn_from), turn_from, inf)
-    s_first = am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps + 1.0), path, max_steps)
+    s_first = am.first_sample(s_lo, s_hi, jnp.minimum(kmin, max_steps.astype(dtype) + 1.0), path,
+                              max_steps)
     s_first = jnp.where(jnp.isfinite(kmin), s_first, inf)
     s_last = jnp.where(jnp.isfinite(s_first), am.last_sample(s_lo, s_hi, path, max_steps),
                        -inf)

@@ -61,7 +61,8 @@ def activation_pass(geometry: Geometry, params: Params, which: str):
         return path, act, out
 
     T = geometry.task_mask.shape[0]
-    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3], jnp.arange(T))
+    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3],
+                                                         jnp.arange(T, dtype=jnp.int32))
 
 
 def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
@@ -205,7 +206,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
             hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
         else:
             upto = jnp.full(B, W)
-        counted = turned & (offsets[None, :] < upto[:, None])
+        counted = turned & (offsets[None, :] < upto[:, None].astype(dtype))
         n_b = n_b + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(n_b.dtype)
         r_b = jnp.where(alive[:, None], r_end, r_b)
         return r_b, n_b, hit_b
@@ -261,7 +262,7 @@ def _assemble(geometry: Geometry, out: am.Outcome, r, meta_steps) -> Rollouts:
     T = geometry.task_mask.shape[0]
     orient = (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis)
     dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
-        out, r, orient, jnp.arange(T))
+        out, r, orient, jnp.arange(T, dtype=jnp.int32))
     code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
                     r)

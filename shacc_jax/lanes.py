@@ -30,11 +30,11 @@ def run(length: Float[Array, " L"], lanes_per_block: int, samples_per_block: int
 
     ``length``: each lane's window length in samples (0: nothing to do). ``state``: a
     pytree of per-lane arrays, leading axis L. ``per_block(lanes, start, valid,
-    block_state) -> block_state``: ``lanes`` (B,) the lanes' indices, ``start`` (int)
-    the column's first sample within each window (c W), ``valid`` (B, W) whether a
-    sample lies within its lane's window, ``block_state`` the state's rows of those
-    lanes. Blocks past the last lane repeat lane 0 with ``valid`` all False; a
-    ``per_block`` must leave such rows as they are."""
+    block_state) -> block_state``: ``lanes`` (B,) the lanes' indices, ``start`` (a
+    float of ``length``'s dtype) the column's first sample within each window (c W),
+    ``valid`` (B, W) whether a sample lies within its lane's window, ``block_state``
+    the state's rows of those lanes. Blocks past the last lane repeat lane 0 with
+    ``valid`` all False; a ``per_block`` must leave such rows as they are."""
     L = length.shape[0]
     B = min(lanes_per_block, L)
     W = samples_per_block
@@ -50,14 +50,15 @@ def run(length: Float[Array, " L"], lanes_per_block: int, samples_per_block: int
         lanes = jax.lax.dynamic_slice(order, (b * B,), (B,))
         left = jax.lax.dynamic_slice(busy, (b * B,), (B,))
         rows = jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, b * B, B), state)
-        valid: Bool[Array, "B W"] = (c * W + offsets)[None, :] < left[:, None]
-        rows = per_block(lanes, c * W, valid, rows)
+        start = (c * W).astype(length.dtype)  # the column's first sample, as a float
+        valid: Bool[Array, "B W"] = (start + offsets)[None, :] < left[:, None]
+        rows = per_block(lanes, start, valid, rows)
         return jax.tree.map(lambda a, r: jax.lax.dynamic_update_slice_in_dim(a, r, b * B, 0),
                             state, rows)
 
     def run_column(c, state):
         # Lanes with more than c W samples left form a prefix of the sorted order.
-        n_active_blocks = (jnp.sum(busy > c * W) + B - 1) // B
+        n_active_blocks = (jnp.sum(busy > (c * W).astype(busy.dtype)) + B - 1) // B
 
         def body(carry):
             b, state = carry

@@ -56,7 +56,7 @@ def inverse_square_weights(sd_opt: Array, in_cluster: Array) -> Array:
 
 def normalised(w: Array) -> Array:
     """Weights over axis 0 (tasks) scaled to sum to one."""
-    return w / jnp.maximum(jnp.sum(w, axis=0), jnp.finfo(w.dtype).tiny)
+    return w / jnp.maximum(jnp.sum(w, axis=0, keepdims=True), jnp.finfo(w.dtype).tiny)
 
 
 def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]:
@@ -72,12 +72,15 @@ def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]
 
 def _chosen_cluster(inside: Array, sd: Array, cluster: Array) -> Array:
     """``cluster[argmin(where(inside, sd, inf))]`` over axis 0 (tasks), the lowest index
-    on a tie, as plain min reductions that XLA vectorises across the batch axes."""
+    on a tie, as plain min reductions that XLA vectorises across the batch axes; the
+    tasks axis kept, of length one."""
     key = jnp.where(inside, sd, jnp.inf)
     T = key.shape[0]
-    index = jnp.arange(T).reshape((T,) + (1,) * (key.ndim - 1))
-    first = jnp.min(jnp.where(key == jnp.min(key, axis=0), index, T), axis=0)
-    return jnp.sum(jnp.where(index == first, cluster, 0), axis=0)
+    index = jnp.arange(T, dtype=cluster.dtype).reshape((T,) + (1,) * (key.ndim - 1))
+    first = jnp.min(jnp.where(key == jnp.min(key, axis=0, keepdims=True), index, T), axis=0,
+                    keepdims=True)
+    return jnp.sum(jnp.where(index == first, cluster, 0), axis=0, keepdims=True,
+                   dtype=cluster.dtype)
 
 
 def yaw_directions(orient_quat: Float[Array, "T 4"]
@@ -110,4 +113,4 @@ def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Arr
     ok = n > jnp.finfo(n.dtype).tiny
     inv = 1.0 / jnp.where(ok, n, 1.0)
     q = horizontal_approach_quat(jnp.where(ok, ax * inv, 1.0), jnp.where(ok, ay * inv, 0.0))
-    return inside, q * jnp.where(q[0] < 0, -1.0, 1.0)
+    return inside, q * jnp.where(q[:1] < 0, -1.0, 1.0)

@@ -29,7 +29,8 @@ def scene_metrics(outcome: Int[Array, "N T"], delta_r: Float[Array, "N T"],
     n_success = jnp.sum(success)
     u = n_success / jnp.maximum(n, 1)
     mean_dr = jnp.where(n_success > 0,
-                        jnp.sum(jnp.where(success, delta_r, 0.0)) / jnp.maximum(n_success, 1),
+                        jnp.sum(jnp.where(success, delta_r, 0.0))
+                        / jnp.maximum(n_success, 1).astype(delta_r.dtype),
                         jnp.nan)
     counts = jnp.stack([jnp.sum(valid & (outcome == c)) for c in range(len(OUTCOMES))])
     return u.astype(delta_r.dtype), mean_dr, counts.astype(jnp.int32), n.astype(jnp.int32)

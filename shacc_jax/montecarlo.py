@@ -27,7 +27,7 @@ def _sample_local(kind, dims, u):
     z = dims[0] * jnp.cbrt(u[..., 2])
     r_cone = z * jnp.tan(jnp.clip(dims[1], 1e-3, 1.5)) * jnp.sqrt(u[..., 0])
     cone = jnp.stack([r_cone * jnp.cos(theta), r_cone * jnp.sin(theta), z], -1)
-    box = (2.0 * u - 1.0) * dims
+    box = (2.0 * u - 1.0) * dims[None]
     sel = jnp.where(kind == shapes.BOX, 2, jnp.where(kind == shapes.CONE, 1, 0))
     return jnp.select([sel == 0, sel == 1], [cyl, cone], box)
 
@@ -57,12 +57,12 @@ def clutteredness_mc(spaces: Spaces, mask, key, n_samples: int = 1 << 16):
     def inside_fractions(kind, center, q, dims, k):
         u = jax.random.uniform(k, (n_samples, 3), dtype=center.dtype)
         local = _sample_local(kind, dims, u)
-        world = center + local @ quat.to_matrix(q).T
+        world = center[None] + local @ quat.to_matrix(q).T
         sd = jax.vmap(lambda p: shapes.all_sdf(prepared, p))(world)
         return jnp.mean(sd <= 0.0, axis=0)
 
     frac = jax.vmap(inside_fractions)(spaces.kind, spaces.center, spaces.quat, spaces.dims, keys)
-    vol = jax.vmap(shapes.volume)(spaces.kind, spaces.dims) * mask
+    vol = jnp.where(mask, jax.vmap(shapes.volume)(spaces.kind, spaces.dims), 0.0)
     pair = 0.5 * (vol[:, None] * frac + vol[None, :] * frac.T)
     valid = mask[:, None] & mask[None, :] & jnp.triu(jnp.ones((T, T), bool), 1)
     return jnp.sum(jnp.where(valid, pair, 0.0)) / jnp.sum(vol)

@@ -30,6 +30,7 @@ Scenes are searched in groups of equal task count, each cut to its own tasks (se
 
 from __future__ import annotations
 
+import contextlib
 from functools import partial
 from typing import Any
 
@@ -75,6 +76,12 @@ def objective(geometry: Geometry, params: Params, pb: SearchProblem, q: Array
     return hits, volume
 
 
+@contextlib.contextmanager
+def _standard_promotion():
+    with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
+        yield
+
+
 def _cma_es(population: int, solution: Array):
     """evosax's CMA-ES, sampling with the symmetric square root of C (B D B^T) instead
     of B D. Both give N(m, sigma^2 C); but the eigenvectors B are unique only up to
@@ -86,6 +93,26 @@ def _cma_es(population: int, solution: Array):
     from evosax.algorithms.distribution_based.cma_es import eigen_decomposition
 
     class SymmetricCMA_ES(CMA_ES):
+        # evosax is written for JAX's standard promotion rules (it multiplies floats by
+        # booleans, broadcasts vectors against matrices): its steps are traced under
+        # them, whatever the caller set (the test suite runs with strict promotion).
+        @property
+        def default_params(self):
+            with _standard_promotion():
+                return super().default_params
+
+        def init(self, *args, **kwargs):
+            with _standard_promotion():
+                return super().init(*args, **kwargs)
+
+        def ask(self, *args, **kwargs):
+            with _standard_promotion():
+                return super().ask(*args, **kwargs)
+
+        def tell(self, *args, **kwargs):
+            with _standard_promotion():
+                return super().tell(*args, **kwargs)
+
         def _ask(self, key, state, params):
             C, B, D = eigen_decomposition(state.C)
             z = jax.random.normal(key, (self.population_size, self.num_dims))
@@ -172,7 +199,8 @@ def validation_starts(pb: SearchProblem, n: int) -> tuple[Array, Array]:
     x, y0, y1, z0, z1 = (pb.start_plane[i] for i in range(5))
     pos = jnp.stack([jnp.full(n, x), y0 + (y1 - y0) * u[0], z0 + (z1 - z0) * u[1]], 1)
     quats = jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0, 0.0], pos.dtype), (n, 4))
-    return jnp.concatenate([pos, quats], 1), jnp.arange(n) < pb.optimize_validation_starts
+    n_real = pb.optimize_validation_starts
+    return jnp.concatenate([pos, quats], 1), jnp.arange(n, dtype=n_real.dtype) < n_real
 
 
 def _best_distinct(z: Array, f: Array, *scores: Array, k: int) -> tuple[Array, ...]:

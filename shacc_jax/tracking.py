@@ -56,8 +56,8 @@ class Lanes(NamedTuple):
 
         p = self.path
         kk = k[None]
-        landing = p.landing[lanes][:, None]
-        step_length = p.step_length[lanes][:, None]
+        landing = p.landing[lanes][None, :, None]
+        step_length = p.step_length[lanes][None, :, None]
         return jnp.where(kk >= landing, vec(p.c0), vec(p.p0) + (kk * step_length) * vec(p.u))
 
 
@@ -94,10 +94,10 @@ def block_targets(geometry: Geometry, params: Params, prep: Prepared, lanes: Lan
         return shapes.Prepared(tasks(sp.kind), tasks(sp.center, 1), tasks(sp.rot, 2),
                                tasks(sp.dims, 1), tasks(sp.trig, 1))
 
-    p = lanes.points(idx, k)
+    p = lanes.points(idx, k)[:, None]  # (3, 1, B, W): components, tasks, lanes, samples
     common = (spaces(prep.init), spaces(prep.opt), tasks(geometry.task_mask),
               tasks(geometry.cluster), tasks(geometry.orient_kind))
-    tau = params.activation_tol[s][:, None]
+    tau = params.activation_tol[s][None, :, None]  # (1, B, 1): tasks, lanes, samples
     if formula == "yaw":
         orient = (tasks(prep.fixed_dir, 1), tasks(geometry.orient_axis, 1))
         inside, q = meta_target_yaw_batch(*common, *orient, p, tau)

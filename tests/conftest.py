@@ -26,6 +26,16 @@ if "SHACC_COMPILE_CACHE" not in os.environ:
     os.environ["SHACC_COMPILE_CACHE"] = _COMPILED
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
 
+# Strict JAX, as the anchors' test suites run: no implicit rank promotion, no implicit
+# dtype promotion, and two CPU devices so that the multi-device paths run on a CI
+# machine without accelerators.
+import jax  # noqa: E402
+
+jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_numpy_dtype_promotion", "strict")
+if os.environ.get("JAX_PLATFORMS", "cpu") == "cpu":
+    jax.config.update("jax_num_cpu_devices", 2)
+
 
 def pytest_unconfigure(config):
     if _COMPILED is not None and not hasattr(config, "workerinput"):

@@ -205,7 +205,7 @@ def _yaw_cluster_scene(rng: np.random.Generator, T: int = 7):
                      np.zeros(T)], axis=1)
     init = Spaces(jnp.asarray(kinds, jnp.int32), jnp.asarray(centers), jnp.asarray(quats),
                   jnp.asarray(dims))
-    opt = init._replace(dims=init.dims * jnp.asarray([0.6, 1.0, 1.0]))
+    opt = init._replace(dims=init.dims * jnp.asarray([[0.6, 1.0, 1.0]]))
     cluster = np.array(([0, 1] * T)[:T])
     cluster[-2] = -1
     mask = np.ones(T, bool)

@@ -153,9 +153,10 @@ def test_component_form_matches_vectorised_form_and_layouts():
     per_point = jax.jit(jax.vmap(lambda p: shapes.all_sdf(prepared, p)))(pts)  # (P, T)
     reference = jax.jit(jax.vmap(lambda p: jax.vmap(vectorised, (0, None))(prepared, p)))(pts)
     np.testing.assert_allclose(per_point, reference, atol=2e-6)
-    # components_first: tasks (T, 1, 1) against points (3, 2, P/2).
+    # components_first: tasks (T, 1, 1) against points (3, 1, 2, P/2) (components, a
+    # tasks axis of one, two rows of points: ranks spelled out, as the meta pass does).
     c = components_first(prepared)
     c = jax.tree.map(lambda a: a[..., None, None], c)
-    grid = pts.T.reshape(3, 2, -1)
+    grid = pts.T.reshape(3, 1, 2, -1)
     laid_out = shapes.prepared_sdf(c, grid)  # (T, 2, P/2)
     np.testing.assert_allclose(laid_out.reshape(len(CASES), -1), per_point.T, atol=1e-6)
