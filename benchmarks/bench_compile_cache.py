@@ -5,7 +5,7 @@
 
 The first form times `shacc evaluate SCENE`; the second (no geometry libraries needed,
 for the accelerator machine) evaluates a bake of ``bench_rollouts.py bake`` with
-``shacc_jax.evaluate_on_devices`` in a new process, the cache on as the command line
+``shacc_jax.run`` in a new process, the cache on as the command line
 turns it on, and once more with it off, and checks that the outcomes agree. Each
 repeat uses a fresh cache folder: run 1 compiles and stores the programs, run 2 loads
 them. Prints the wall times (whole process, imports included) and their ratio;
@@ -36,13 +36,13 @@ BAKE_CHILD = """
 import hashlib, sys, time
 import jax, numpy as np
 sys.path.insert(0, {bench!r})
-from bench_rollouts import _load
+from bench_rollouts import _load_bake
 from sweeps import compile_cache
 import shacc_jax
 compile_cache.enable()
-inputs = _load({bake!r}, {n})
+baked = _load_bake({bake!r}, {n})
 t = time.perf_counter()
-ev = shacc_jax.evaluate_on_devices(*inputs)
+ev = shacc_jax.run(baked).evaluation
 print("evaluate", round(time.perf_counter() - t, 3), jax.devices()[0].device_kind,
       hashlib.sha256(np.asarray(ev.rollouts.outcome).tobytes()).hexdigest()[:16])
 """

@@ -35,7 +35,7 @@ def main() -> None:
     baked = bake(results)
 
     def run(b):
-        return shacc_jax.evaluate_on_devices(*shacc_jax.inputs(b)).rollouts
+        return shacc_jax.run(b).evaluation.rollouts
 
     whole = run(baked)
     N, S = baked.n_starts, baked.n_scenes

@@ -1,4 +1,4 @@
-"""Memory one rollout needs during evaluation, for ``sweeps/memory.py``'s model.
+"""Memory one rollout needs during evaluation, for the memory model of ``shacc_jax/runplan.py``.
 
     python benchmarks/bench_memory.py --bake bake.npz --scenes 1000 [--collision]
 

@@ -67,10 +67,10 @@ def main() -> None:
     import jax
 
     from geometry_precompute import bake, shipped_scene_paths
+    from shacc_jax import run
     from shacc_jax.optimize import winner_name
     from sweeps import compile_cache
     from sweeps.inputs import parse_sets
-    from sweeps.pipeline import evaluate_baked
 
     compile_cache.enable()
     sets = parse_sets(args.set)
@@ -90,7 +90,7 @@ def main() -> None:
             {"optimize_selection": selection})) for r in precomputed]
         t1 = time.perf_counter()
         baked = bake(results)
-        ev, found = evaluate_baked(baked, ("shrinking", "optimized"))
+        ev, found = run(baked, ("shrinking", "optimized"))
         t2 = time.perf_counter()
         u = ev.metrics.u_scene
         one = 1.0 / ev.metrics.n_rollouts[:, 0]

@@ -57,13 +57,10 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
-def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=None,
-          chunk: int = 16):
-    """(geometry, params, layout) of the first n scenes of a bake file (repeated if it
-    holds fewer)."""
+def _load_bake(path: str, n: int, collision: bool = False):
+    """The first n scenes of a bake file (repeated if it holds fewer), as an object with
+    the bake's arrays as attributes."""
     from types import SimpleNamespace
-
-    import shacc_jax
 
     data = np.load(path)
     missing = [k for k in FIELDS if k not in data]
@@ -77,7 +74,16 @@ def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=
         if k == "collision":
             a = np.full_like(a, collision)
         arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
-    return shacc_jax.inputs(SimpleNamespace(**arrays), modes, lanes_per_block=block,
+    return SimpleNamespace(**arrays)
+
+
+def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=None,
+          chunk: int = 16):
+    """(geometry, params, layout) of the first n scenes of a bake file (repeated if it
+    holds fewer)."""
+    import shacc_jax
+
+    return shacc_jax.inputs(_load_bake(path, n, collision), modes, lanes_per_block=block,
                             samples_per_block=chunk)
 
 
@@ -187,30 +193,27 @@ def cmd_points(args) -> None:
 
 
 def _run_devices(args, modes) -> None:
-    """Wall time of evaluate_on_devices (one thread per device), or with --sharded of
-    evaluate_sharded (one jax.sharding program), results back on the host, with 1..K
-    devices."""
+    """Wall time of ``shacc_jax.run`` planned over 1..K devices (one host thread per
+    device), results back on the host."""
     import jax
 
-    import shacc_jax
-
-    run = shacc_jax.evaluate_sharded if args.sharded else shacc_jax.evaluate_on_devices
+    from shacc_jax.runplan import execute, plan
 
     for n in args.sizes:
-        geometry, params, layout = _load(args.bake, n, modes=modes)
-        S, T = geometry.task_mask.shape
-        rollouts = S * T * geometry.starts.shape[1] * len(modes)
+        baked = _load_bake(args.bake, n)
+        S, T = baked.task_mask.shape
+        rollouts = S * T * baked.starts.shape[1] * len(modes)
         for k in args.devices:
             devs = jax.local_devices()[:k]
-            run(geometry, params, layout, devs)  # compile and warm up
+            p = plan(baked, modes, devices=devs)
+            execute(p, baked)  # compile and warm up
             times = []
             for _ in range(args.repeat):
                 t = time.perf_counter()
-                run(geometry, params, layout, devs)
+                execute(p, baked)
                 times.append(time.perf_counter() - t)
             med = statistics.median(times)
-            print(json.dumps({"devices": [str(d) for d in devs], "sharded": args.sharded,
-                              "scenes": S,
+            print(json.dumps({"devices": list(p.devices), "scenes": S,
                               "rollouts": rollouts, "wall_s_median": med,
                               "rollouts_per_s": rollouts / med}), flush=True)
 
@@ -255,9 +258,7 @@ def main() -> None:
     r.add_argument("--grid", type=int, nargs=2, metavar=("NY", "NZ"),
                    help="replace the baked 6 x 6 start grid")
     r.add_argument("--devices", type=int, nargs="+",
-                   help="time evaluate_on_devices with these device counts")
-    r.add_argument("--sharded", action="store_true",
-                   help="with --devices: evaluate_sharded instead of one thread per device")
+                   help="time shacc_jax.run planned over these device counts")
     r.add_argument("--collision", action="store_true",
                    help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--json")

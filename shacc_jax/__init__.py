@@ -1,6 +1,7 @@
 """JAX half of the ShaCC evaluator: SDFs, orientation spaces, the meta skill and
-the Automaton, batched in one jitted evaluation, :func:`evaluate`. Reads only the
-bake's arrays, by the bake's schema (never imports trimesh, manifold3d or coal)."""
+the Automaton, batched in one jitted evaluation, :func:`evaluate`, which :func:`run`
+plans and runs for a bake (pieces, devices, fields). Reads only the bake's arrays, by
+the bake's schema (never imports trimesh, manifold3d or coal)."""
 
 from .determinism import pin_cpu_codegen
 
@@ -8,9 +9,10 @@ pin_cpu_codegen()  # before JAX starts its CPU backend: determinism.py says why
 
 # ruff: noqa: E402
 
-from .evaluation import evaluate, evaluate_cached, evaluate_on_devices, evaluate_sharded
+from .evaluation import evaluate
 from .metrics import host_metrics
 from .montecarlo import clutteredness_mc
+from .runplan import Run, RunPlan, budget, execute, plan, run
 from .types import (
     ALL_MODES,
     MODES,
@@ -29,6 +31,6 @@ from .types import (
 )
 
 __all__ = ["ALL_MODES", "MODES", "OPTIMIZED", "OUTCOMES", "Evaluation", "Geometry", "Layout",
-           "Params", "Rollouts", "SceneMetrics", "Search", "SearchProblem", "Spaces",
-           "clutteredness_mc", "evaluate", "evaluate_cached",
-           "evaluate_on_devices", "evaluate_sharded", "host_metrics", "inputs"]
+           "Params", "Rollouts", "Run", "RunPlan", "SceneMetrics", "Search", "SearchProblem",
+           "Spaces", "budget", "clutteredness_mc", "evaluate", "execute", "host_metrics",
+           "inputs", "plan", "run"]

@@ -24,7 +24,7 @@ depend on how many others share its compiled program. Two things made it depend:
 
 With both, every Rollouts field of a batch equals that of the same rollouts
 evaluated in any split of its start grid, bit for bit (tests/test_determinism.py),
-as long as every split holds two starts or more (``sweeps.memory``). On an H100 the
+as long as every split holds two starts or more (``runplan``). On an H100 the
 same holds (``benchmarks/bench_determinism.py``: 0 differing bytes over 200 scenes in
 every split; before these changes 53 321 in pieces of two starts). On aarch64 (NEON
 has FMA and XLA has no switch for it) only the reductions are fixed.

@@ -19,7 +19,6 @@ scheduler sorts the lanes of all points together, and the outputs get a leading 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from functools import partial
 
 import jax
@@ -31,9 +30,9 @@ from geometry_precompute.schema import lanes_per_block_default
 from . import automaton as am
 from . import collision as col
 from . import lanes as lane_scheduler
-from . import program_cache, tracking
+from . import tracking
 from .metrics import batch_metrics
-from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts, SceneMetrics
+from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
 
 # With collision checks, a block of the lane scheduler takes 1/share of the lanes of one
 # without, by backend (None: accelerators). Measured on an H100 (a quarter, half, all:
@@ -349,149 +348,3 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     if points:
         result = jax.tree.map(lambda a: a.reshape(points, S, *a.shape[1:]), result)
     return result
-
-
-# The structure of evaluate's output (for the exported program cache, which stores flat
-# leaves).
-_EVALUATION_STRUCTURE = Evaluation(Rollouts._make([0] * len(Rollouts._fields)),
-                                   SceneMetrics._make([0] * len(SceneMetrics._fields)))
-
-
-def evaluate_cached(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
-    """:func:`evaluate` through the exported program cache (``program_cache``; the
-    plain call when no cache folder is set): a later process with the same layout,
-    shapes and dtypes loads the compiled program instead of compiling it.
-
-    Example::
-
-        geometry, params, layout = shacc_jax.inputs(bake(results))
-        ev = shacc_jax.evaluate_cached(geometry, params, layout)   # as evaluate
-    """
-    return program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
-                              _EVALUATION_STRUCTURE)
-
-
-def _fields(fields: Sequence[str] | None) -> frozenset[str]:
-    """The Rollouts fields named by ``fields`` (None: all), each checked."""
-    if fields is None:
-        return frozenset(Rollouts._fields)
-    if isinstance(fields, str):
-        raise ValueError(f"fields: a sequence of Rollouts field names, not the string "
-                         f"{fields!r}")
-    unknown = [f for f in fields if f not in Rollouts._fields]
-    if unknown:
-        raise ValueError(f"fields: {', '.join(map(repr, unknown))} not among the Rollouts "
-                         f"fields ({', '.join(Rollouts._fields)})")
-    return frozenset(fields)
-
-
-def _host(tree):
-    """A pytree of device arrays as NumPy arrays: every copy to the host is started
-    before the first is waited for (``jax.device_get``), not one after another."""
-    import numpy as np
-
-    return jax.tree.map(np.asarray, jax.device_get(tree))
-
-
-def _pad_scenes(geometry: Geometry, params: Params, parts: int):
-    """Host geometry and params (leading scenes axis; params may have a points axis
-    first) padded to a multiple of ``parts`` scenes by repeating the last scene."""
-    import numpy as np
-
-    pad = -geometry.task_mask.shape[0] % parts
-    if not pad:
-        return geometry, params
-
-    def grow(a, axis):
-        last = np.take(a, [-1], axis=axis)
-        return np.concatenate([a, np.repeat(last, pad, axis)], axis=axis)
-
-    axis = params.dt.ndim - 1
-    return (jax.tree.map(lambda a: grow(a, 0), geometry),
-            jax.tree.map(lambda a: grow(a, axis), params))
-
-
-def evaluate_on_devices(geometry: Geometry, params: Params, layout: Layout,
-                        devices=None, fields: Sequence[str] | None = None) -> Evaluation:
-    """:func:`evaluate` spread over several devices (default: every local one), returned
-    as NumPy arrays. The scenes are split into equal parts (the last padded by
-    repeating a scene), each part runs on its device from its own host thread, and the
-    results are joined in order. One thread per device because the lane scheduler's
-    while loops wait on the host at every iteration: dispatched from one thread, the
-    devices took turns (measured on two H200s: 0.74 s against 0.57 s for one device).
-    Integer results equal a single-device evaluation's; floats agree to rounding.
-
-    ``fields``: the :class:`Rollouts` fields to copy to the host (default: all); the
-    others are None. A sweep keeps 4 of the 8, which is 17 of a chunk's 57 MB; the
-    copy to the host is most of an evaluation's time after the run itself.
-
-    Example::
-
-        geometry, params, layout = shacc_jax.inputs(bake(results))
-        ev = shacc_jax.evaluate_on_devices(geometry, params, layout,
-                                           fields=("outcome", "delta_R"))
-        ev.rollouts.point is None          # not copied back
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numpy as np
-
-    devices = list(devices or jax.local_devices())
-    keep = _fields(fields)
-
-    def on(device, g, p):
-        g, p = jax.device_put((g, p), device)  # nothing to copy for arrays already there
-        ev = evaluate_cached(g, p, layout)
-        rollouts = ev.rollouts._replace(**{k: None for k in Rollouts._fields if k not in keep})
-        return _host(ev._replace(rollouts=rollouts))
-
-    S = geometry.task_mask.shape[0]
-    # Parts of at least two scenes: a program with an axis of length one is simplified
-    # differently by XLA, and its rollouts' last bits would differ (determinism.py).
-    devices = devices[:max(1, S // 2)]
-    if len(devices) == 1:
-        return on(devices[0], geometry, params)
-    geometry, params = _host(geometry), _host(params)
-    axis = params.dt.ndim - 1
-    per = -(-S // len(devices))
-    geometry, params = _pad_scenes(geometry, params, len(devices))
-    parts = [(jax.tree.map(lambda a, k=k: a[k * per:(k + 1) * per], geometry),
-              jax.tree.map(lambda a, k=k: np.take(a, np.arange(k * per, (k + 1) * per), axis),
-                           params)) for k in range(len(devices))]
-    with ThreadPoolExecutor(len(devices)) as pool:
-        outs = list(pool.map(lambda kp: on(devices[kp[0]], *kp[1]), enumerate(parts)))
-    joined = jax.tree.map(lambda *xs: np.concatenate(xs, axis=axis), *outs)
-    return jax.tree.map(lambda a: np.take(a, np.arange(S), axis), joined)
-
-
-def evaluate_sharded(geometry: Geometry, params: Params, layout: Layout,
-                     devices=None) -> Evaluation:
-    """:func:`evaluate` over several devices (default: every local one) as one program
-    with ``jax.sharding``: the scenes axis is split over a one-axis mesh and
-    ``jax.shard_map`` runs :func:`evaluate` on each device's scenes (the lane sort and
-    the while loops are per device, with no communication). S is padded to a multiple
-    of the device count by repeating the last scene; the result (NumPy) has the
-    original S. Params without a points axis only.
-
-    Example::
-
-        geometry, params, layout = shacc_jax.inputs(bake(results))
-        ev = shacc_jax.evaluate_sharded(geometry, params, layout)   # every local device
-        ev.metrics.u_scene.shape                                    # (S, M)
-    """
-    import numpy as np
-    from jax.sharding import Mesh, NamedSharding
-    from jax.sharding import PartitionSpec as P
-
-    devices = list(devices or jax.local_devices())
-    geometry, params = _host(geometry), _host(params)
-    if params.dt.ndim != 1:
-        raise ValueError("evaluate_sharded takes Params of shape (S,); use "
-                         "evaluate_on_devices for a points axis")
-    S = geometry.task_mask.shape[0]
-    geometry, params = _pad_scenes(geometry, params, len(devices))
-    mesh = Mesh(np.array(devices), ("scenes",))
-    geometry, params = jax.device_put((geometry, params), NamedSharding(mesh, P("scenes")))
-    run = jax.shard_map(partial(evaluate, layout=layout), mesh=mesh, in_specs=P("scenes"),
-                        out_specs=P("scenes"), check_vma=False)
-    return jax.tree.map(lambda a: np.asarray(a)[:S], run(geometry, params))

@@ -65,10 +65,10 @@ class Spaces(NamedTuple):
     dims: Array
 
 
-def _read(cls, baked, dtype=None):
+def _read(cls, baked, dtype=None, on_host: bool = False):
     """``cls``'s fields read from the bake by name (attributes or a mapping); floats
     cast to ``dtype`` (default: float64 when jax_enable_x64 is on, else float32),
-    integers to int32."""
+    integers to int32; NumPy arrays with ``on_host``, else on the default device."""
     dtype = dtype or jax.dtypes.canonicalize_dtype(np.float64)
     get = baked.__getitem__ if isinstance(baked, dict) else lambda k: getattr(baked, k)
     out = {}
@@ -80,7 +80,7 @@ def _read(cls, baked, dtype=None):
             a = a.astype(np.int32)
         # A plain copy to the device: jnp.asarray would compile (or load from the
         # persistent cache) a small program per shape and dtype, ten per chunk shape.
-        out[name] = jax.device_put(a)
+        out[name] = a if on_host else jax.device_put(a)
     return cls(**out)
 
 
@@ -113,10 +113,11 @@ class Geometry(NamedTuple):
     obj_size: Float[Array, "S O 3"]
 
     @classmethod
-    def from_bake(cls, baked, dtype=None) -> Geometry:
+    def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Geometry:
         """The fields read from a bake (or a mapping) by name; floats cast to ``dtype``
-        (default float32, float64 with x64 on)."""
-        return _read(cls, baked, dtype)
+        (default float32, float64 with x64 on); NumPy arrays ``on_host``, else on the
+        default device."""
+        return _read(cls, baked, dtype, on_host)
 
     def spaces(self, which: str):
         """One scene's ``init`` or ``opt`` spaces, prepared for queries (rotation
@@ -144,10 +145,10 @@ class Params(NamedTuple):
     gripper_palm_radius: Float[Array, "*P S"]
 
     @classmethod
-    def from_bake(cls, baked, dtype=None) -> Params:
+    def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:
         """The settings read from a bake (or a mapping) by name (see
         :meth:`Geometry.from_bake`)."""
-        return _read(cls, baked, dtype)
+        return _read(cls, baked, dtype, on_host)
 
     def gripper(self) -> Float[Array, "... 4"]:
         """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
@@ -177,9 +178,9 @@ class SearchProblem(NamedTuple):
     optimize_validate: Bool[Array, " S"]
 
     @classmethod
-    def from_bake(cls, baked, dtype=None) -> SearchProblem:
+    def from_bake(cls, baked, dtype=None, on_host: bool = False) -> SearchProblem:
         """The search's arrays read from a bake by name (see :meth:`Geometry.from_bake`)."""
-        return _read(cls, baked, dtype)
+        return _read(cls, baked, dtype, on_host)
 
 
 def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,

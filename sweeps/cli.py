@@ -125,6 +125,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", metavar="OUT.jsonl", type=_path,
                    help="write the one-scene JSON object (docs/reference/outputs.md), one line per "
                    "scene (JSON Lines)")
+    c.add_argument("--plan", action="store_true",
+                   help="print how the evaluation would run (pieces of the start grid, "
+                   "devices, block sizes, memory) and stop")
     c.set_defaults(func="evaluate_cmd:cmd_evaluate")
 
     c = command("optimize", "search a scene's best task-space sizes: the optimized mode "

@@ -242,7 +242,7 @@ def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
         **base, "resources": {PRECOMPUTE: 1}, "env": here}} for i in range(n_cpu)}
     # An evaluation worker allocates GPU memory as it needs it: reserving 75 % of an H100
     # up front took 0.9 s of every sweep's start (benchmarks/RESULTS.md); the budget
-    # (sweeps.memory) reads the allocator's limit either way. A user's setting wins.
+    # (shacc_jax.runplan) reads the allocator's limit either way. A user's setting wins.
     alloc = {"XLA_PYTHON_CLIENT_PREALLOCATE":
              os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE", "false")}
     evals = [{"CUDA_VISIBLE_DEVICES": g, **alloc} for g in gpus] or [{"JAX_PLATFORMS": "cpu"}]

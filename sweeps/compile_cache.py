@@ -95,7 +95,7 @@ def lean_locations() -> None:
 def enable() -> Path | None:
     """Turn both caches on for this process (before the first compilation), and
     :func:`lean_locations`. Called by every command that evaluates and by the Python
-    API's first evaluation (``sweeps.pipeline.evaluate_baked``), so notebooks and
+    API's first evaluation (``sweeps.pipeline.evaluate_results``), so notebooks and
     scripts keep their programs too; a second call does nothing."""
     lean_locations()
     path = cache_dir()

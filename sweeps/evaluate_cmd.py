@@ -97,6 +97,24 @@ def print_tasks(ev, s: int, with_scene: bool = False) -> None:
             print(f"{lead}{mode:<10} {e['success_rate']:>7.3f} {counts}")
 
 
+def print_plan(results, modes) -> int:
+    """``shacc evaluate --plan``: the RunPlan of the batch, nothing evaluated."""
+    import shacc_jax
+    from geometry_precompute.bake import bake
+
+    baked = bake(results)
+    plain = [m for m in modes if m != "optimized"]
+    if plain:
+        print(shacc_jax.plan(baked, plain).describe())
+    if "optimized" in modes:
+        if plain:
+            print()
+        print("optimized: the search first (its own starts), then the shacc mode on the "
+              "spaces it found:")
+        print(shacc_jax.plan(baked, ["shacc"]).describe())
+    return 0
+
+
 def cmd_evaluate(args) -> int:
     if len(set(args.modes)) != len(args.modes):
         raise InputError("<arguments>", "--modes", f"each mode once, got {args.modes}")
@@ -106,6 +124,8 @@ def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
     results = [load_and_precompute(p, args.set) for p in paths]
     t1 = time.perf_counter()
+    if args.plan:
+        return print_plan(results, args.modes)
     ev = evaluate_results(results, args.modes)
     with human_output(args.json):
         if len(results) == 1:

@@ -174,7 +174,6 @@ def _warm_up(job: ChunkJob, ref) -> dict:
     from geometry_precompute import precompute, random_scene
     from geometry_precompute.scene import Scene
 
-    from .pipeline import evaluate_points
     from .workers import bake_batch, point_settings
 
     WARM_UP_MARKS["imports"] = time.time()
@@ -188,8 +187,7 @@ def _warm_up(job: ChunkJob, ref) -> dict:
     batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
                        job.shapes.tasks, job.shapes.objects, 0.0, settings)
     WARM_UP_MARKS["baked"] = time.time()
-    evaluate_points([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes],
-                    job.modes, tuple(COMPACT), metrics=False)
+    _evaluate([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes], job.modes)
     WARM_UP_MARKS["ended"] = time.time()
     loaded = _COUNTS["loaded"] - before["loaded"]
     return {"seconds": time.perf_counter() - t0, "loaded": loaded,
@@ -240,17 +238,33 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
                         "join": time.perf_counter() - t0})
 
 
+def _evaluate(bakes: list, modes) -> list[tuple]:
+    """Per point of a chunk: (its Evaluation, its search or None), from one
+    ``shacc_jax.run`` with a points axis. Only the COMPACT fields come back, and no
+    per-scene metrics: encode_chunk computes them on a CPU worker, off this worker's
+    path (8 ms a 1 000-scene chunk)."""
+    import jax
+
+    import shacc_jax
+
+    fields = tuple(COMPACT)
+    if len(bakes) == 1:  # no points axis to add and take off again
+        one = shacc_jax.run(bakes[0], modes, fields=fields, metrics=False)
+        assert not isinstance(one.search, list)
+        return [(one.evaluation, one.search)]
+    out = shacc_jax.run(bakes[0], modes, points=bakes, fields=fields, metrics=False)
+    searches = out.search if isinstance(out.search, list) else [None] * len(bakes)
+    return [(jax.tree.map(lambda a, i=i: a[i], out.evaluation), found)
+            for i, found in enumerate(searches)]
+
+
 def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
     """A chunk's evaluation from its :func:`join_chunk`. Only the accelerator's part
     runs here; :func:`encode_chunk` makes the tables on a CPU worker."""
-    from .pipeline import evaluate_points
-
     _setup()
     before = dict(_COUNTS)
     t1 = time.perf_counter()
-    # The per-scene metrics are computed by encode_chunk on a CPU worker, off this
-    # worker's path (8 ms a 1 000-scene chunk).
-    evs = evaluate_points(joined.bakes, job.modes, tuple(COMPACT), metrics=False)
+    evs = _evaluate(joined.bakes, job.modes)
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}

@@ -5,18 +5,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
-from functools import partial
+from dataclasses import dataclass
 
-import jax
 import numpy as np
 
 import shacc_jax
-from geometry_precompute import BakedScenes, InputError, PrecomputeResult
-from geometry_precompute.bake import GEOMETRY_FIELDS, bake
-from shacc_jax.types import OPTIMIZED, OUTCOMES, Evaluation, Search
+from geometry_precompute import BakedScenes, PrecomputeResult
+from geometry_precompute.bake import bake
+from shacc_jax.types import OUTCOMES, Evaluation, Search
 
-from . import compile_cache, memory
+from . import compile_cache
 from .output import precompute_json, provenance
 
 __all__ = ["Evaluated", "evaluate_results", "scene_json"]
@@ -44,83 +42,6 @@ class Evaluated:
         return self.search
 
 
-def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: Sequence[str]) -> Evaluation:
-    """One evaluation whose mode axis (1) is ``modes``, from mode -> (evaluation, index).
-    When one evaluation already holds the modes in that order, it is that evaluation
-    (no copy)."""
-    ev0 = parts[modes[0]][0]
-    if all(parts[m][0] is ev0 and parts[m][1] == i for i, m in enumerate(modes)) and \
-            np.shape(ev0.rollouts.outcome)[1] == len(modes):
-        return ev0
-
-    def pick(get):
-        if get(parts[modes[0]][0]) is None:  # a field not copied to the host
-            return None
-        return np.concatenate([np.asarray(get(parts[m][0]))[:, parts[m][1]:parts[m][1] + 1]
-                               for m in modes], axis=1)
-    ev0 = next(iter(parts.values()))[0]
-    rollouts = type(ev0.rollouts)(*(pick(lambda e, k=k: e.rollouts[k])
-                                    for k in range(len(ev0.rollouts))))
-    metrics = None if ev0.metrics is None else type(ev0.metrics)(
-        *(pick(lambda e, k=k: e.metrics[k]) for k in range(len(ev0.metrics))))
-    return Evaluation(rollouts, metrics)
-
-
-def evaluate_baked(baked: BakedScenes, modes: Sequence[str], evaluate=None,
-                   found: Search | None = None,
-                   metrics: bool = True) -> tuple[Evaluation, Search | None]:
-    """Every mode of ``modes`` (shacc_jax.ALL_MODES) for a bake, as NumPy arrays in that
-    order, and the search when ``optimized`` is among them: the search runs on its own
-    starts, then its spaces replace the optimised ones and the scene's usual starts are
-    evaluated under shacc's rules (reference/model). ``found``: a search already run for
-    these scenes (its parameters are used, no search runs)."""
-    compile_cache.enable()  # from Python too, not only from the command line
-    modes = tuple(modes)
-    plain = tuple(m for m in modes if m != OPTIMIZED)
-    parts: dict[str, tuple[Evaluation, int]] = {}
-    if plain:
-        ev = memory.evaluate_in_pieces(baked, plain, evaluate, metrics=metrics)
-        parts.update({m: (ev, i) for i, m in enumerate(plain)})
-    if OPTIMIZED in modes:
-        from shacc_jax.optimize import optimized_spaces, search, search_sizes
-
-        if found is None:
-            try:
-                search_sizes(baked)
-            except ValueError as e:
-                raise InputError("<batch>", "optimize_population/optimize_generations",
-                                 str(e)) from None
-            found = search(baked, memory.search_scenes_per_call(baked))
-        center, dims = optimized_spaces(baked, found)
-        best = replace(baked, center_opt=center, dims_opt=dims)
-        parts[OPTIMIZED] = (memory.evaluate_in_pieces(best, ("shacc",), evaluate,
-                                                      metrics=metrics), 0)
-    return _join_modes(parts, modes), found
-
-
-def evaluate_points(bakes: Sequence[BakedScenes], modes: Sequence[str],
-                    fields: Sequence[str] | None = None, metrics: bool = True
-                    ) -> list[tuple[Evaluation, Search | None]]:
-    """Bakes of the same scenes that differ only in rollout settings (Params), evaluated
-    as one call with a points axis; NumPy results, one Evaluation per bake. The
-    optimized mode searches per bake (its search depends on the rollout settings).
-    ``fields``: the Rollouts fields to copy to the host, the others None (default all;
-    ``shacc_jax.evaluate_on_devices``). ``metrics`` False leaves the per-scene metrics
-    None (a sweep computes them on a CPU worker, ``shacc_jax.host_metrics``). Returns
-    (Evaluation, the optimized mode's search or None) per bake."""
-    run = shacc_jax.evaluate_on_devices if fields is None else \
-        partial(shacc_jax.evaluate_on_devices, fields=fields)
-    if len(bakes) == 1 or OPTIMIZED in modes:
-        return [evaluate_baked(b, modes, run, metrics=metrics) for b in bakes]
-    for b in bakes[1:]:  # a grouping error would evaluate one point on another's spaces
-        for name in GEOMETRY_FIELDS:
-            if not np.array_equal(getattr(b, name), getattr(bakes[0], name)):
-                raise RuntimeError(f"sweep points grouped together differ in {name}")
-    ev = memory.evaluate_in_pieces(bakes[0], tuple(modes), run, params=[
-        shacc_jax.Params.from_bake(b) for b in bakes], metrics=metrics)
-    return [(jax.tree.map(lambda a, i=i: a[i], ev), None) for i in range(len(bakes))]
-
-
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
                      max_tasks: int | None = None, found: Search | None = None) -> Evaluated:
     """Bake and evaluate precomputed scenes in one batch: what ``shacc evaluate`` does.
@@ -141,13 +62,16 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
         ev.evaluation.metrics.u_scene[:, ev.modes.index("shacc")]   # (S,)
         scene_json(ev, 0)["modes"]["baseline"]["outcome"]          # per start and task
     """
+    compile_cache.enable()  # from Python too, not only from the command line
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
-    ev, found = evaluate_baked(baked, modes, found=found)
+    out = shacc_jax.run(baked, modes, found=found)
+    assert not isinstance(out.search, list)  # one search: no points axis here
     t2 = time.perf_counter()
-    return Evaluated(list(results), baked, ev, tuple(modes),
-                     {"bake": t1 - t0, "evaluate": t2 - t1}, found, provenance(device=True))
+    return Evaluated(list(results), baked, out.evaluation, tuple(modes),
+                     {"bake": t1 - t0, "evaluate": t2 - t1}, out.search,
+                     provenance(device=True))
 
 
 def _none_if_nan(x: float):

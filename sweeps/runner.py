@@ -90,7 +90,8 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
     # serves the rest; a warm cache makes this part smaller than estimated).
     stages = {json.dumps(DEFAULTS.with_overrides(p).by_stage("precompute"), sort_keys=True,
                          default=str) for p in cfg.points}
-    from . import memory
+    from shacc_jax.runplan import bytes_per_rollout
+
     from .cluster import local_gpus
 
     n_workers = workers or os.cpu_count() or 1
@@ -110,7 +111,7 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
         "tables_and_writes": rollouts * TABLE_S_PER_ROLLOUT + n_chunks * CHUNK_OVERHEAD_S,
     }
     collision = any(s["collision"] != "off" for s in settings)
-    per_chunk = memory.bytes_per_rollout(collision, platform) * \
+    per_chunk = bytes_per_rollout(collision, platform) * \
         int(max(np.prod(g) for g in grids)) * max_tasks * \
         len(cfg.modes) * bucket(chunk) * max(len(g) for g in point_groups(cfg))
     return {"points": len(cfg.points), "scenes": n, "scene_evaluations": len(cfg.points) * n,

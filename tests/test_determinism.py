@@ -15,7 +15,7 @@ import pytest
 
 import shacc_jax
 from geometry_precompute import DEFAULTS, bake, precompute, random_scene
-from sweeps import memory
+from shacc_jax.runplan import bytes_per_rollout, run
 from sweeps.config import parse_config
 from sweeps.runner import run_sweep
 
@@ -23,7 +23,7 @@ from sweeps.runner import run_sweep
 def _run(baked):
     """The rollouts of a bake, by the door the command line uses (so that the tests
     below share its compiled programs)."""
-    return shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked)).rollouts
+    return run(baked).evaluation.rollouts
 
 
 def _same_bits(a, b) -> bool:
@@ -62,10 +62,10 @@ def test_any_split_of_the_scenes_gives_the_same_bits(batch):
 
 def test_pieces_of_the_memory_budget_give_the_same_bits_and_metrics(batch):
     modes = shacc_jax.MODES
-    whole = memory.evaluate_in_pieces(batch, modes, limit=10**12)
-    per_start = memory.bytes_needed(batch.n_scenes, 1, batch.n_tasks, len(modes))
+    whole = run(batch, modes, budget_bytes=10**12).evaluation
+    per_start = bytes_per_rollout(False) * batch.n_scenes * batch.n_tasks * len(modes)
     for starts in (2, 5):
-        pieces = memory.evaluate_in_pieces(batch, modes, limit=starts * per_start)
+        pieces = run(batch, modes, budget_bytes=starts * per_start).evaluation
         for a, b in zip(whole, pieces, strict=True):
             for x, y in zip(a, b, strict=True):
                 assert _same_bits(x, y)
@@ -123,3 +123,14 @@ def test_sweep_tables_are_the_same_bits_whatever_the_budget_and_resume(tmp_path,
     whole = _tables(tmp_path / "whole")
     assert _tables(tmp_path / "pieces") == whole
     assert _tables(resumed) == whole
+
+
+def test_the_suite_runs_strict_on_two_devices():
+    """conftest's settings hold in every test process: no implicit rank or dtype
+    promotion, and two CPU devices, so the multi-device split runs in CI too."""
+    import jax
+
+    flags = jax.config
+    assert flags.jax_numpy_rank_promotion == "raise"
+    assert flags.jax_numpy_dtype_promotion == "strict"
+    assert len(jax.devices("cpu")) == 2

@@ -24,9 +24,9 @@ from geometry_precompute import (
 )
 from shacc_jax import optimize
 from shacc_jax.optimize import cut, objective, optimized_spaces, search, spaces_at
+from shacc_jax.runplan import run, search_scenes_per_call
 from shacc_jax.types import Geometry, Params, SearchProblem
 from sweeps.cli import main
-from sweeps.pipeline import evaluate_baked
 
 SMALL = {"optimize_population": 8, "optimize_generations": 4, "optimize_starts": 16}
 
@@ -151,7 +151,7 @@ def test_optimized_mode_is_shacc_on_the_found_spaces(small_search):
     the search's, and agrees rollout for rollout with the NumPy Automaton's shacc rules
     on the spaces the search found."""
     results, baked, _ = small_search
-    ev, found = evaluate_baked(baked, ("shrinking", "optimized"))
+    ev, found = run(baked, ("shrinking", "optimized"))
     center, dims = optimized_spaces(baked, found)
     best = replace(baked, center_opt=center, dims_opt=dims)
     for s in (1, 9):
@@ -185,7 +185,7 @@ def test_a_batch_needs_one_search_size(shipped_results):
     a = precompute(shipped_results[0].scene,
                    shipped_results[0].settings.with_overrides({"optimize_population": 8}))
     with pytest.raises(InputError, match="optimize_population"):
-        evaluate_baked(bake([a, shipped_results[1]]), ("optimized",))
+        run(bake([a, shipped_results[1]]), ("optimized",))
 
 
 def test_optimize_command(tmp_path, capsys):
@@ -232,27 +232,25 @@ def test_a_scenes_search_does_not_depend_on_its_batch(small_search, shipped_resu
 
 
 def test_a_search_too_large_for_memory_is_refused_before_it_starts(shipped_results):
-    from sweeps import memory
-
     r = precompute(shipped_results[0].scene, shipped_results[0].settings.with_overrides(
         {"optimize_population": 4096, "optimize_starts": 65536}))
     baked = bake([r])
     with pytest.raises(InputError, match="optimize_population x optimize_starts"):
-        memory.search_scenes_per_call(baked, limit=2**30)
-    assert memory.search_scenes_per_call(bake([shipped_results[0]]), limit=2**30) >= 1
+        search_scenes_per_call(baked, budget_bytes=2**30)
+    assert search_scenes_per_call(bake([shipped_results[0]]), budget_bytes=2**30) >= 1
 
 
 def test_a_given_search_is_used_not_run_again(small_search, monkeypatch):
-    """``evaluate_baked(..., found=...)`` (reproduce's finer field grid) evaluates the
+    """``run(..., found=...)`` (reproduce's finer field grid) evaluates the
     given parameters and never searches."""
     _, baked, found = small_search
-    ref, _ = evaluate_baked(baked, ("optimized",))
+    ref, _ = run(baked, ("optimized",))
 
     def no_search(*args, **kwargs):
         raise AssertionError("searched again")
 
     monkeypatch.setattr(optimize, "search", no_search)
-    again, used = evaluate_baked(baked, ("optimized",), found=found)
+    again, used = run(baked, ("optimized",), found=found)
     assert used is found
     np.testing.assert_array_equal(again.rollouts.outcome, ref.rollouts.outcome)
 
@@ -287,7 +285,7 @@ def test_the_optimized_mode_never_loses_to_a_perfect_shrinking_held_out():
     scene = scene_from_dict(ROW)
     results = [precompute(scene, scene.settings(overrides={"optimize_selection": sel}))
                for sel in ("search", "validation")]
-    ev, found = evaluate_baked(bake(results), ("shrinking", "optimized"))
+    ev, found = run(bake(results), ("shrinking", "optimized"))
     u = ev.metrics.u_scene  # (scene, mode)
     assert u[0, 0] == u[1, 0] == 1.0  # Shrinking: perfect on the held-out grid
     assert found.objective_shrunk[0] == 1.0

@@ -171,7 +171,7 @@ def test_dry_run_does_not_build_random_scenes():
 def test_dry_run_budgets_collision_checks(tmp_path):
     """The per-chunk memory estimate follows the memory model: a point with collision
     checks needs more than the same point without, for random and for file sources."""
-    from sweeps import memory
+    from shacc_jax.runplan import bytes_per_rollout
     from sweeps.cluster import local_gpus
     from sweeps.config import parse_config
     from sweeps.runner import dry_run
@@ -189,7 +189,7 @@ def test_dry_run_budgets_collision_checks(tmp_path):
               for c in ("off", "mjx")}
         assert mb["off"] > 0, kind
         assert mb["mjx"] / mb["off"] == pytest.approx(
-            memory.bytes_per_rollout(True, platform) / memory.bytes_per_rollout(False, platform)
+            bytes_per_rollout(True, platform) / bytes_per_rollout(False, platform)
         ), kind
 
 

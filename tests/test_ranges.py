@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import jax
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -20,7 +21,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from geometry_precompute.settings import INT32_MAX, MAX_STARTS
-from sweeps.memory import bytes_per_rollout, evaluate_in_pieces
+from shacc_jax.runplan import bytes_per_rollout, plan, run
 from sweeps.pipeline import evaluate_results
 
 SCENE = shipped_scene_paths()[8]
@@ -104,67 +105,77 @@ def test_any_value_of_a_setting_loads_cleanly_or_is_rejected(name):
 
 def test_grid_in_pieces_equals_one_piece(shipped_results):
     """A grid that needs several pieces at a small forced budget gives the same results
-    as one piece (the integers exactly, the floats to float32 rounding)."""
-    import shacc_jax
+    as one piece, bit for bit (each rollout depends only on its own start; every piece
+    has at least two)."""
     from geometry_precompute import bake
 
     baked = bake(shipped_results[8:10])
-    whole = evaluate_in_pieces(baked, shacc_jax.MODES, shacc_jax.evaluate, limit=2**40)
     per_start = bytes_per_rollout(False) * baked.n_scenes * baked.n_tasks * 3
-    pieces = evaluate_in_pieces(baked, shacc_jax.MODES, shacc_jax.evaluate,
-                                limit=per_start * 10)  # 36 starts in 4 pieces of 10
+    assert plan(baked, budget_bytes=per_start * 10).pieces == (0, 10, 20, 30)
+    whole = run(baked, budget_bytes=2**40).evaluation
+    pieces = run(baked, budget_bytes=per_start * 10).evaluation  # 36 starts, 4 pieces
     for name, a, b in zip(whole.rollouts._fields, whole.rollouts, pieces.rollouts, strict=True):
-        if np.issubdtype(a.dtype, np.integer):
-            np.testing.assert_array_equal(a, b, err_msg=name)
-        elif name == "delta_R":
-            # 2 arccos(c) in float32: near c = 1 one float32 step of c moves the angle
-            # by up to 2e-5 rad (at 0.03 rad), so the pieces are compared where the
-            # rounding happens, in c = cos(delta_R / 2), to a few float32 steps.
-            np.testing.assert_allclose(np.cos(a / 2), np.cos(b / 2), rtol=0,
-                                       atol=4 * np.finfo(np.float32).eps, equal_nan=True,
-                                       err_msg=name)
-        else:
-            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6, equal_nan=True,
-                                       err_msg=name)
-    np.testing.assert_array_equal(whole.metrics.outcome_counts, pieces.metrics.outcome_counts)
-    np.testing.assert_allclose(whole.metrics.u_scene, pieces.metrics.u_scene)
-    np.testing.assert_allclose(whole.metrics.delta_R_mean, pieces.metrics.delta_R_mean,
-                               rtol=1e-5, equal_nan=True)
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    for name, a, b in zip(whole.metrics._fields, whole.metrics, pieces.metrics, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
 
 
 def test_only_the_named_fields_reach_the_host(shipped_results):
-    """``evaluate_on_devices(fields=...)`` (what a sweep's chunks use) copies only those
-    Rollouts fields: equal to the full evaluation's, the others None, also when the
-    batch is split into pieces; a name that is no field is refused."""
-    from functools import partial
-
-    import shacc_jax
+    """``run(fields=...)`` (what a sweep's chunks use) copies only those Rollouts fields:
+    equal to the full evaluation's, the others None, also when the batch is split into
+    pieces and with a points axis; a name that is no field is refused."""
     from geometry_precompute import bake
-    from sweeps.pipeline import evaluate_points
 
     baked = bake(shipped_results[8:10])
-    whole = evaluate_in_pieces(baked, shacc_jax.MODES, limit=2**40)
+    whole = run(baked, budget_bytes=2**40).evaluation
     keep = ("outcome", "step", "delta_R")
-    run = partial(shacc_jax.evaluate_on_devices, fields=keep)
     per_start = bytes_per_rollout(False) * baked.n_scenes * baked.n_tasks * 3
-    one = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=2**40)
-    pieces = evaluate_in_pieces(baked, shacc_jax.MODES, run, limit=per_start * 10)
-    two_points = [ev for ev, _ in evaluate_points([baked, baked], shacc_jax.MODES, keep)]
-    for got in (one, pieces, *two_points):
+    one = run(baked, fields=keep, budget_bytes=2**40).evaluation
+    pieces = run(baked, fields=keep, budget_bytes=per_start * 10).evaluation
+    points = run(baked, fields=keep, points=[baked, baked]).evaluation
+    for got in (one, pieces, *(jax.tree.map(lambda a, i=i: a[i], points) for i in (0, 1))):
         for name in whole.rollouts._fields:
-            a, b = getattr(whole.rollouts, name), getattr(got.rollouts, name)
-            if name == "delta_R":  # pieces may round differently (see the test above)
-                np.testing.assert_allclose(np.cos(a / 2), np.cos(b / 2), rtol=0,
-                                           atol=4 * np.finfo(np.float32).eps, equal_nan=True)
-            elif name in keep:
-                np.testing.assert_array_equal(a, b, err_msg=name)
+            if name in keep:
+                np.testing.assert_array_equal(getattr(whole.rollouts, name),
+                                              getattr(got.rollouts, name), err_msg=name)
             else:
                 assert getattr(got.rollouts, name) is None, name
         np.testing.assert_array_equal(got.metrics.outcome_counts, whole.metrics.outcome_counts)
     with pytest.raises(ValueError, match=r"'orientaton' not among the Rollouts fields"):
-        shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked), fields=("orientaton",))
+        plan(baked, fields=("orientaton",))
     with pytest.raises(ValueError, match="not the string 'outcome'"):
-        shacc_jax.evaluate_on_devices(*shacc_jax.inputs(baked), fields="outcome")
+        plan(baked, fields="outcome")
+
+
+def test_the_plan_is_a_pure_function_of_the_bake_and_its_arguments(shipped_results):
+    """plan() reads shapes and settings only: pieces from the budget, the device split
+    with its padding (parts of at least two scenes), the backend's block size, the
+    fields; describe() says all of it."""
+    from geometry_precompute import bake
+
+    baked = bake(shipped_results[:5])  # S = 5, N = 36
+    S, T = 5, baked.n_tasks
+    per_start = bytes_per_rollout(False, "gpu") * S * T * 2
+    p = plan(baked, ("baseline", "shacc"), budget_bytes=per_start * 12,
+             devices=["gpu:0", "gpu:1", "gpu:2"], backend="gpu", fields=("outcome",),
+             metrics=False)
+    assert p.pieces == (0, 12, 24) and p.starts_per_piece == 12
+    assert p.devices == ("gpu:0", "gpu:1") and p.scenes_per_part == 3
+    assert p.padded_scenes == 6 and p.fields == ("outcome",) and not p.metrics
+    assert p.layout.lanes_per_block == 1 << 17 and p.layout.modes == ("baseline", "shacc")
+    assert p == plan(baked, ("baseline", "shacc"), budget_bytes=per_start * 12,
+                     devices=["gpu:0", "gpu:1", "gpu:2"], backend="gpu", fields=["outcome"],
+                     metrics=False)
+    text = p.describe()
+    for words in ("5 scenes x 36 starts", "3 piece(s) of 12 starts", "2 (gpu:0, gpu:1)",
+                  "3 scenes each (1 padding)", "copied back: outcome",
+                  "blocks of 131072 lanes"):
+        assert words in text, (words, text)
+    one = plan(baked, budget_bytes=2**40, devices=["cpu:0"], backend="cpu")
+    assert one.pieces == (0,) and one.padded_scenes == 5 and one.layout.lanes_per_block == 256
+    # A one-start grid still runs programs of two starts (the start repeated).
+    single = replace(baked, starts=baked.starts[:, :1])
+    assert plan(single, budget_bytes=2**40, devices=["cpu:0"]).starts_per_piece == 2
 
 
 def test_budget_from_the_environment_splits_evaluate(monkeypatch):
@@ -195,24 +206,36 @@ def test_collision_checks_are_budgeted_as_they_need(shipped_results):
     """With collision checks on, a rollout needs several times the memory (measured:
     benchmarks/RESULTS.md), so a budget that holds the plain batch in one piece splits the
     checked one; its results equal the whole batch's."""
-    import shacc_jax
     from geometry_precompute import bake
 
     plain = bake(shipped_results[8:9])
     checked = replace(plain, collision=np.ones_like(plain.collision))
     assert bytes_per_rollout(True) >= 4 * bytes_per_rollout(False)
-    calls = []
-
-    def counting(geometry, params, layout):
-        calls.append(geometry.starts.shape[1])
-        return shacc_jax.evaluate(geometry, params, layout)
-
     limit = bytes_per_rollout(False) * plain.n_tasks * 3 * plain.n_starts
-    evaluate_in_pieces(plain, shacc_jax.MODES, counting, limit=limit)
-    assert calls == [plain.n_starts]
-    calls.clear()
-    pieces = evaluate_in_pieces(checked, shacc_jax.MODES, counting, limit=limit)
-    assert len(calls) > 1 and max(calls) < plain.n_starts
-    whole = evaluate_in_pieces(checked, shacc_jax.MODES, shacc_jax.evaluate, limit=2**40)
+    assert plan(plain, budget_bytes=limit).pieces == (0,)
+    split = plan(checked, budget_bytes=limit)
+    assert len(split.pieces) > 1 and split.starts_per_piece < plain.n_starts
+    pieces = run(checked, budget_bytes=limit).evaluation
+    whole = run(checked, budget_bytes=2**40).evaluation
     np.testing.assert_array_equal(whole.rollouts.outcome, pieces.rollouts.outcome)
     np.testing.assert_array_equal(whole.rollouts.step, pieces.rollouts.step)
+
+
+def test_evaluate_plan_prints_the_plan_and_evaluates_nothing(monkeypatch, capsys):
+    """``shacc evaluate --plan``: the RunPlan for the batch, with the pieces the budget
+    allows; no evaluation runs."""
+    from shacc_jax import runplan
+    from sweeps.cli import main
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("evaluated")
+
+    monkeypatch.setattr(runplan, "execute", refuse)
+    assert main(["evaluate", str(SCENE), "--plan"]) == 0
+    out = capsys.readouterr().out
+    assert "1 scenes x 36 starts x 3 tasks" in out and "1 piece(s) of 36 starts" in out
+    monkeypatch.setenv("SHACC_MEMORY_BUDGET", str(bytes_per_rollout(False) * 3 * 3 * 7))
+    assert main(["evaluate", str(SCENE), "--plan", "--modes", "baseline", "shrinking", "shacc",
+                 "optimized"]) == 0
+    out = capsys.readouterr().out
+    assert "6 piece(s) of 7 starts" in out and "optimized: the search first" in out

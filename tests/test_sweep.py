@@ -334,48 +334,36 @@ def test_lost_scheduler_ends_the_sweep_in_one_line_and_the_rerun_goes_on(tmp_pat
     _assert_twelve_scenes(out, ref_out)
 
 
-def test_evaluation_spread_over_two_cpu_devices(shipped_bake, tmp_path):
-    np.savez(tmp_path / "b.npz", **shipped_bake.arrays())
-    script = f"""
-import numpy as np, jax
-from types import SimpleNamespace
-import shacc_jax
-assert len(jax.local_devices()) == 2, jax.local_devices()
-d = dict(np.load({str(tmp_path / 'b.npz')!r}))
-b = SimpleNamespace(**d, n_scenes=d["task_mask"].shape[0])
-g, p, layout = shacc_jax.inputs(b)
-one = jax.tree.map(np.asarray, shacc_jax.evaluate(g, p, layout))
-mesh = shacc_jax.evaluate_sharded(g, p, layout)
-# Two sweep points (a points axis) spread over the devices, against each point as its
-# own call on one device.
-p2 = jax.tree.map(lambda a: np.stack([np.asarray(a), np.asarray(a)]), p)
-p2 = p2._replace(v_max=p2.v_max * np.array([[1.0], [0.5]], p2.v_max.dtype))
-both = shacc_jax.evaluate_on_devices(g, p2, layout)
-half = jax.tree.map(lambda a: np.asarray(a)[1], p2)
-slow = jax.tree.map(np.asarray, shacc_jax.evaluate(g, half, layout))
-assert both.rollouts.outcome.shape == (2, *one.rollouts.outcome.shape)
-np.testing.assert_array_equal(both.rollouts.outcome[1], slow.rollouts.outcome)
-assert (both.rollouts.step[1] != both.rollouts.step[0]).any()  # v_max mattered
-two = jax.tree.map(lambda a: a[0], both)
-# Only some fields copied to the host, over two devices: those equal, the others None.
-kept = shacc_jax.evaluate_on_devices(g, p2, layout, fields=("outcome", "delta_R"))
-np.testing.assert_array_equal(kept.rollouts.outcome, both.rollouts.outcome)
-np.testing.assert_array_equal(kept.rollouts.delta_R, both.rollouts.delta_R)
-assert kept.rollouts.step is None and kept.rollouts.orientation is None
-for other in (two, mesh):
-    for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(other)):
-        if x.dtype.kind == "f":  # float32: another batch shape may round differently
-            np.testing.assert_allclose(x, y, atol=5e-3, equal_nan=True)
-        else:
-            np.testing.assert_array_equal(x, y)
-print("ok", two.rollouts.outcome.shape)
-"""
-    env = {**os.environ, "JAX_PLATFORMS": "cpu",
-           "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
-    res = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
-                         text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-2000:]
-    assert res.stdout.startswith("ok (12, 3, 36, 3)"), res.stdout
+def test_evaluation_spread_over_two_cpu_devices(shipped_bake):
+    """run() splits the scenes over both CPU devices of the test process (conftest sets
+    two): the same bits as on one device, also with a points axis (each point as its own
+    call) and with only some fields copied back."""
+    from dataclasses import replace
+
+    import jax
+
+    import shacc_jax
+
+    assert len(jax.local_devices()) == 2
+    assert len(shacc_jax.plan(shipped_bake).devices) == 1  # a CPU's devices share its cores
+    two = shacc_jax.plan(shipped_bake, devices=jax.local_devices())
+    assert len(two.devices) == 2 and two.padded_scenes == 12
+    both = shacc_jax.execute(two, shipped_bake)
+    one = shacc_jax.execute(shacc_jax.plan(shipped_bake, devices=jax.local_devices()[:1]),
+                            shipped_bake)
+    for x, y in zip(jax.tree.leaves(one), jax.tree.leaves(both), strict=True):
+        np.testing.assert_array_equal(x, y)
+    slow = replace(shipped_bake, v_max=shipped_bake.v_max * 0.5)
+    keep = ("outcome", "step")
+    points = shacc_jax.run(shipped_bake, points=[shipped_bake, slow], fields=keep).evaluation
+    alone = shacc_jax.run(slow, fields=keep).evaluation
+    np.testing.assert_array_equal(points.rollouts.outcome[1], alone.rollouts.outcome)
+    np.testing.assert_array_equal(points.rollouts.step[0], both.rollouts.step)
+    assert (points.rollouts.step[1] != points.rollouts.step[0]).any()  # v_max mattered
+    assert points.rollouts.delta_R is None and points.rollouts.orientation is None
+    with pytest.raises(ValueError, match="differ from the bake in center_init"):
+        shacc_jax.run(shipped_bake, points=[replace(shipped_bake,
+                                                    center_init=shipped_bake.center_init + 1)])
 
 
 def test_task_counts_without_building_match_the_built_scenes(tmp_path):
@@ -517,28 +505,20 @@ def test_sweep_over_collision_and_gripper_sizes(tmp_path):
     assert by[("mjx", 0.04)] != by[("mjx", 0.14)]
 
 
-def test_modes_of_one_evaluation_are_joined_without_a_copy(shipped_bake):
-    """``pipeline._join_modes``: modes that one evaluation holds in the asked order come
-    back as that evaluation (no copy); in another order, or from several evaluations,
-    each mode's column is taken from where it was evaluated."""
-    import jax
-
+def test_modes_come_back_in_the_order_asked(shipped_bake):
+    """``run`` returns the modes in the order asked, each mode's rollouts and metrics the
+    same bits whatever the order or company it was evaluated in."""
     import shacc_jax
-    from sweeps.pipeline import _join_modes
 
     modes = shacc_jax.MODES
-    ev = jax.device_get(shacc_jax.evaluate(*shacc_jax.inputs(shipped_bake, modes)))
-    parts = {m: (ev, i) for i, m in enumerate(modes)}
-    assert _join_modes(parts, modes) is ev
-    backwards = _join_modes(parts, modes[::-1])
+    ev = shacc_jax.run(shipped_bake, modes).evaluation
+    backwards = shacc_jax.run(shipped_bake, modes[::-1]).evaluation
     for got, want in zip([*backwards.rollouts, *backwards.metrics],
                          [*ev.rollouts, *ev.metrics], strict=True):
-        np.testing.assert_array_equal(got, np.asarray(want)[:, ::-1])
-    one = jax.device_get(shacc_jax.evaluate(*shacc_jax.inputs(shipped_bake, ("shacc",))))
-    mixed = _join_modes({"baseline": (ev, 0), "shacc": (one, 0)}, ("baseline", "shacc"))
-    assert mixed is not ev
-    np.testing.assert_array_equal(mixed.rollouts.outcome[:, 1], one.rollouts.outcome[:, 0])
-    np.testing.assert_array_equal(mixed.rollouts.outcome[:, 0], ev.rollouts.outcome[:, 0])
+        np.testing.assert_array_equal(got, want[:, ::-1])
+    alone = shacc_jax.run(shipped_bake, ("shacc",)).evaluation
+    np.testing.assert_array_equal(alone.rollouts.outcome[:, 0], ev.rollouts.outcome[:, 2])
+    np.testing.assert_array_equal(alone.metrics.u_scene[:, 0], ev.metrics.u_scene[:, 2])
 
 
 def test_random_source_presets(tmp_path):

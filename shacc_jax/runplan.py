@@ -1,0 +1,473 @@
+"""Running an evaluation: a :class:`RunPlan` computed once on the host, then executed
+against the one jitted :func:`~shacc_jax.evaluation.evaluate`.
+
+Every way of evaluating a bake (``shacc evaluate``, ``optimize``, ``reproduce``, a
+sweep's evaluation worker, Python) goes through :func:`run`:
+
+1. :func:`plan` decides, in NumPy and before anything is traced, everything about the
+   run that is not a rollout: the static :class:`~geometry_precompute.schema.Layout`
+   (with the backend's block size), the sweep points, the pieces of the start grid the
+   memory budget allows, the devices the scenes are split over and their padding, and
+   the fields copied back. It is a pure function of the bake's shapes and its
+   arguments; ``shacc evaluate --plan`` prints it.
+2. :func:`execute` runs the plan: each piece of starts, each device's share of the
+   scenes from its own host thread, through the exported program cache; the pieces
+   and parts are joined once, and the per-scene metrics computed once, in double
+   precision, over the joined rollouts (``host_metrics``).
+
+Each rollout depends only on its own scene, start and task, so neither the pieces nor
+the device split change an answer: every part holds at least two scenes and every piece
+at least two starts, because XLA simplifies an axis of length one differently and a
+rollout's last bits would then depend on its part (``determinism``; a test holds the
+answers to a recording, bit for bit).
+
+The memory budget: ``$SHACC_MEMORY_BUDGET`` (bytes; suffixes K, M, G allowed) if set,
+else half of what the device has free (an accelerator's free memory, or the host's
+available memory on a CPU).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from geometry_precompute.errors import InputError
+from geometry_precompute.schema import (
+    GEOMETRY,
+    MODES,
+    OPTIMIZED,
+    PARAMS,
+    Layout,
+    lanes_per_block_default,
+)
+
+from . import program_cache
+from .evaluation import evaluate
+from .metrics import host_metrics
+from .types import Evaluation, Geometry, Params, Rollouts, SceneMetrics, Search
+
+# Memory one rollout needs during evaluation (rollout outputs, the activation pass, the
+# tracking blocks, and with collision checks each rollout's per-object windows and the
+# checks' blocks), with a safety factor of about 1.2 over the largest measured: peak
+# device memory on an H100 (10 000 and 1 000 random 10-task scenes) 251-393 bytes
+# without checks and 2 194-3 051 with; XLA's memory analysis of the CPU program (100
+# and 1 000 scenes) 1 004-1 089 and 3 554-5 420 (benchmarks/RESULTS.md, memory per
+# rollout).
+BYTES_PER_ROLLOUT = {("accelerator", False): 600, ("accelerator", True): 3700,
+                     ("cpu", False): 1300, ("cpu", True): 6500}
+ENV = "SHACC_MEMORY_BUDGET"
+MAX_BUDGET = 2**60  # bytes: an exbibyte, beyond any machine
+_GEOMETRY_FIELDS = tuple(f.name for f in GEOMETRY)
+_PARAM_FIELDS = tuple(f.name for f in PARAMS)
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """How one evaluation runs, decided before anything is traced (:func:`plan`).
+
+    ``layout``: the compiled program's static side, its block size resolved for the
+    backend. ``n_scenes``, ``n_starts``: the bake's S and N. ``n_points``: P sweep
+    points over one geometry (None: Params of shape (S,)). ``pieces``: the first start
+    of each piece of the start grid, ``starts_per_piece`` starts each (the last piece
+    padded by repeating the grid's last start, so every piece has one shape and one
+    program). ``devices``: where the scene parts run, one host thread each;
+    ``scenes_per_part`` scenes each, the scenes padded by repeating the last one to
+    ``padded_scenes``. ``fields``: the Rollouts fields copied to the host (the others
+    stay None). ``metrics``: whether :func:`execute` computes the per-scene metrics.
+    ``bytes_per_piece`` of the ``budget`` (bytes), the estimate that chose the
+    pieces."""
+
+    layout: Layout
+    n_scenes: int
+    n_starts: int
+    n_points: int | None
+    pieces: tuple[int, ...]
+    starts_per_piece: int
+    devices: tuple[str, ...]
+    scenes_per_part: int
+    padded_scenes: int
+    fields: tuple[str, ...]
+    metrics: bool
+    bytes_per_piece: int
+    budget: int
+
+    def describe(self) -> str:
+        """The plan as a few lines for people (``shacc evaluate --plan``).
+
+        Example::
+
+            print(shacc_jax.plan(bake(results)).describe())
+        """
+        lay = self.layout
+        points = "" if self.n_points is None else f" x {self.n_points} points"
+        return "\n".join([
+            f"batch: {self.n_scenes} scenes{points} x {self.n_starts} starts x "
+            f"{lay.n_tasks} tasks (padded) x {len(lay.modes)} modes "
+            f"({', '.join(lay.modes)})",
+            f"program: meta formula {lay.meta_formula}, collision checks "
+            f"{'on' if lay.collision_checks else 'off'}, blocks of {lay.lanes_per_block} "
+            f"lanes x {lay.samples_per_block} samples",
+            f"memory: {_size(self.bytes_per_piece)} per piece of a budget of "
+            f"{_size(self.budget)}: {len(self.pieces)} piece(s) of "
+            f"{self.starts_per_piece} starts",
+            f"devices: {len(self.devices)} ({', '.join(self.devices)}), "
+            f"{self.scenes_per_part} scenes each ({self.padded_scenes - self.n_scenes} "
+            f"padding)",
+            f"copied back: {', '.join(self.fields)}; metrics "
+            f"{'on the host, once' if self.metrics else 'left to the caller'}",
+        ])
+
+
+class Run(NamedTuple):
+    """What :func:`run` returns: the evaluation (NumPy arrays; a leading P axis with
+    sweep points) and the optimized mode's search (None without that mode; with sweep
+    points, one per point)."""
+
+    evaluation: Evaluation
+    search: Search | list[Search] | None
+
+
+def _parse_bytes(text: str) -> int:
+    units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+    t = text.strip().upper().removesuffix("B")
+    scale = units.get(t[-1:], 1)
+    number = t[:-1] if t[-1:] in units else t
+    value: float
+    try:
+        value = int(number) * scale if len(number) <= 30 else -1
+    except ValueError:
+        try:
+            value = float(number) * scale
+        except (ValueError, OverflowError):
+            value = -1
+    if not 1 <= value <= MAX_BUDGET:  # NaN, inf and 400-digit numbers fail here too
+        raise InputError(f"${ENV}", ENV, f"must be a number of bytes from 1 to 2^60 such as "
+                         f"2G, got {text[:40]!r}")
+    return int(value)
+
+
+def budget() -> int:
+    """Bytes one evaluation may use: ``$SHACC_MEMORY_BUDGET``, else half of what the
+    first local device has free.
+
+    Example::
+
+        shacc_jax.budget() // 2**20      # MiB
+    """
+    if os.environ.get(ENV):
+        return _parse_bytes(os.environ[ENV])
+    dev = jax.local_devices()[0]
+    stats = dev.memory_stats() if hasattr(dev, "memory_stats") else None
+    if stats and "bytes_limit" in stats:
+        free = stats["bytes_limit"] - stats.get("bytes_in_use", 0)
+    else:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(0.5 * free)
+
+
+def bytes_per_rollout(collision: bool, backend: str | None = None) -> int:
+    """:data:`BYTES_PER_ROLLOUT` of the program that runs on ``backend`` ("cpu" or an
+    accelerator's; default the one in use), with or without collision checks."""
+    backend = backend or jax.default_backend()
+    return BYTES_PER_ROLLOUT[("cpu" if backend == "cpu" else "accelerator", bool(collision))]
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("GB", 2**30), ("MB", 2**20), ("KB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:,.1f} {unit}"
+    return f"{int(n)} bytes"
+
+
+def _fields(fields: Sequence[str] | None) -> tuple[str, ...]:
+    """The Rollouts fields named by ``fields`` (None: all), each checked."""
+    if fields is None:
+        return Rollouts._fields
+    if isinstance(fields, str):
+        raise ValueError(f"fields: a sequence of Rollouts field names, not the string "
+                         f"{fields!r}")
+    unknown = [f for f in fields if f not in Rollouts._fields]
+    if unknown:
+        raise ValueError(f"fields: {', '.join(map(repr, unknown))} not among the Rollouts "
+                         f"fields ({', '.join(Rollouts._fields)})")
+    return tuple(f for f in Rollouts._fields if f in fields)
+
+
+def _stacked_params(points: Sequence) -> Params:
+    """P bakes' (or Params') rollout settings as one Params with a points axis, NumPy."""
+    return Params._make(np.stack([np.asarray(getattr(p, k)) for p in points])
+                        for k in _PARAM_FIELDS)
+
+
+def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
+         fields: Sequence[str] | None = None, metrics: bool = True,
+         budget_bytes: int | None = None, devices: Sequence | None = None,
+         backend: str | None = None) -> RunPlan:
+    """The :class:`RunPlan` of evaluating ``baked`` in ``modes`` (of
+    ``shacc_jax.MODES``), decided in NumPy. A pure function of its arguments; the
+    defaults read the machine (``budget()``, ``jax.local_devices()``,
+    ``jax.default_backend()``).
+
+    :param baked: a bake (``geometry_precompute.bake``), (S, ...) arrays.
+    :param points: P bakes (or Params) of the same scenes that differ only in their
+        rollout settings: evaluated as one call with a points axis.
+    :param fields: the Rollouts fields to copy back (default all).
+    :param metrics: compute the per-scene metrics (else left None).
+    :param budget_bytes: the memory budget (default :func:`budget`).
+    :param devices: where to split the scenes (default every local accelerator, or the
+        first CPU device).
+    :param backend: the backend whose block size and memory model apply (default the
+        one in use).
+    :raises InputError: when two start poses of the batch do not fit the budget.
+
+    Example::
+
+        p = shacc_jax.plan(bake(results), budget_bytes=2**30, devices=["cpu:0"])
+        p.pieces, p.layout.lanes_per_block
+    """
+    from geometry_precompute.bake import batch_layout
+
+    backend = backend or jax.default_backend()
+    if devices is None:
+        # An accelerator's devices each add their own compute; a CPU's devices
+        # (jax_num_cpu_devices) share the host's cores and would only compile the
+        # program once more each, so a CPU run uses one unless asked for more.
+        local = jax.local_devices()
+        devices = local[:1] if backend == "cpu" else local
+    devices = list(devices)
+    limit = budget() if budget_bytes is None else int(budget_bytes)
+    S, N, T = baked.task_mask.shape[0], baked.starts.shape[1], baked.task_mask.shape[1]
+    modes = tuple(modes)
+    P = None if points is None else len(points)
+    collision = bool(np.any(baked.collision)) if points is None else \
+        any(bool(np.any(p.collision)) for p in points)
+    if points is None:
+        layout = batch_layout(baked, modes)
+    else:
+        # The geometry's layout with every point's settings: collision checks if any
+        # point has them on.
+        arrays = {k: getattr(baked, k) for k in _GEOMETRY_FIELDS}
+        arrays.update(_stacked_params(points)._asdict())
+        layout = batch_layout(_Arrays(arrays), modes)
+    layout = replace(layout, lanes_per_block=layout.lanes_per_block
+                     or lanes_per_block_default(backend))
+    per_start = bytes_per_rollout(collision, backend) * S * T * len(modes) * (P or 1)
+    # At least two starts in every program, even a one-start grid (padded by repeating
+    # it): where an axis has length one, XLA simplifies the arithmetic around it
+    # differently, and a rollout's last bits would depend on its piece.
+    n_per = N if per_start * N <= limit and N >= 2 else limit // per_start
+    if n_per < 2:
+        raise InputError("<memory>", "batch", f"two start poses of this batch "
+                         f"({P or 1} x {S} scenes x {T} tasks x {len(modes)} modes) need "
+                         f"{_size(2 * per_start)}, more than the budget of {_size(limit)}; "
+                         f"evaluate fewer scenes at once or raise ${ENV}")
+    n_per = min(n_per, max(N, 2))
+    # Parts of at least two scenes, for the same reason.
+    devices = devices[:max(1, S // 2)]
+    per_part = -(-S // len(devices))
+    return RunPlan(layout=replace(layout, n_starts=n_per), n_scenes=S, n_starts=N, n_points=P,
+                   pieces=tuple(range(0, N, n_per)), starts_per_piece=n_per,
+                   devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
+                   padded_scenes=per_part * len(devices), fields=_fields(fields),
+                   metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
+
+
+class _Arrays:
+    """Attribute access to a dict of arrays (what ``batch_layout`` reads)."""
+
+    def __init__(self, arrays: dict):
+        self.__dict__.update(arrays)
+
+
+def _pad(a: np.ndarray, n: int, axis: int) -> np.ndarray:
+    """``a`` grown to ``n`` along ``axis`` by repeating its last entry."""
+    extra = n - a.shape[axis]
+    if extra <= 0:
+        return a
+    return np.concatenate([a, np.repeat(np.take(a, [-1], axis=axis), extra, axis)], axis=axis)
+
+
+_EVALUATION_STRUCTURE = Evaluation(Rollouts._make([0] * len(Rollouts._fields)),
+                                   SceneMetrics._make([0] * len(SceneMetrics._fields)))
+
+
+def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
+               fields: tuple[str, ...]) -> Rollouts:
+    """One part on one device, through the program cache; the fields copied back
+    (every copy started before the first is waited for)."""
+    geometry, params = jax.device_put((geometry, params), device)
+    ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
+                            _EVALUATION_STRUCTURE)
+    wanted = {k: getattr(ev.rollouts, k) for k in fields}
+    host = jax.tree.map(np.asarray, jax.device_get(wanted))
+    return Rollouts._make(host.get(k) for k in Rollouts._fields)
+
+
+def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
+    """Run a :func:`plan` against the bake (and the points) it was made for; NumPy
+    results, joined once, metrics once.
+
+    Example::
+
+        ev = shacc_jax.execute(shacc_jax.plan(baked), baked)
+        ev.metrics.u_scene          # (S, M)
+    """
+    if (baked.task_mask.shape[0], baked.starts.shape[1]) != (p.n_scenes, p.n_starts) \
+            or (points is None) != (p.n_points is None):
+        raise ValueError("execute: the plan was made for another bake or other points")
+    dtype = jax.dtypes.canonicalize_dtype(np.float64)
+    geometry = Geometry.from_bake(baked, dtype, on_host=True)
+    params = Params.from_bake(baked if points is None else _stacked_params(points), dtype,
+                              on_host=True)
+    lead = 0 if points is None else 1  # a points axis before the scenes axis
+    S, N, n, per = p.n_scenes, p.n_starts, p.starts_per_piece, p.scenes_per_part
+    if p.padded_scenes > S:
+        geometry = jax.tree.map(lambda a: _pad(a, p.padded_scenes, 0), geometry)
+        params = jax.tree.map(lambda a: _pad(a, p.padded_scenes, lead), params)
+    local = {str(d): d for d in jax.local_devices()}
+    devices = [local[name] for name in p.devices]
+
+    def part(k: int, piece: Geometry) -> tuple[Geometry, Params]:
+        if len(devices) == 1:
+            return piece, params
+        rows = np.arange(k * per, (k + 1) * per)
+        return (jax.tree.map(lambda a: a[rows], piece),
+                jax.tree.map(lambda a: np.take(a, rows, axis=lead), params))
+
+    def join(outs: list[Rollouts], axis: int, keep: int) -> Rollouts:
+        """Parts (or pieces) joined along ``axis``, cut to ``keep`` (padding dropped)."""
+        def one(*xs):
+            if xs[0] is None:
+                return None
+            a = xs[0] if len(xs) == 1 else np.concatenate(xs, axis=axis)
+            return a if a.shape[axis] == keep else np.take(a, np.arange(keep), axis=axis)
+        return Rollouts._make(one(*xs) for xs in zip(*outs, strict=True))
+
+    pieces = []
+    with ThreadPoolExecutor(len(devices)) as pool:
+        for first in p.pieces:
+            idx = np.minimum(np.arange(first, first + n), N - 1)  # the last piece padded
+            piece = geometry if n == N else geometry._replace(starts=geometry.starts[:, idx])
+            if len(devices) == 1:
+                outs = [_on_device(devices[0], *part(0, piece), p.layout, p.fields)]
+            else:
+                outs = list(pool.map(lambda k, piece=piece: _on_device(
+                    devices[k], *part(k, piece), p.layout, p.fields), range(len(devices))))
+            pieces.append(join([join(outs, lead, S)], lead + 2, min(n, N - first)))
+    rollouts = join(pieces, lead + 2, N)
+    metrics = host_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask) \
+        if p.metrics else None
+    # Fields not copied back (and the metrics, when the caller computes them) are None.
+    return Evaluation._make((rollouts, metrics))
+
+
+def search_scenes_per_call(baked, budget_bytes: int | None = None) -> int:
+    """Scenes the optimized mode's search may take in one call: each holds population x
+    search starts x tasks activation rollouts at once."""
+    limit = budget() if budget_bytes is None else budget_bytes
+    T = baked.task_mask.shape[1]
+    # The larger of a generation (population x search starts) and the final validation
+    # (the candidates, Shrinking's and the initial sizes x validation starts).
+    at_once = max(int(np.max(baked.optimize_population)) * baked.opt_starts.shape[1],
+                  (int(np.max(baked.optimize_candidates)) + 2)
+                  * int(np.max(baked.optimize_validation_starts)))
+    per_scene = bytes_per_rollout(False) * at_once * T
+    if per_scene > limit:
+        raise InputError("<memory>", "optimize_population x optimize_starts", "the search "
+                         f"of one scene ({T} tasks) needs {_size(per_scene)}, more than "
+                         f"the budget of {_size(limit)}; lower them or raise ${ENV}")
+    return limit // per_scene
+
+
+def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
+        fields: Sequence[str] | None = None, metrics: bool = True, found: Any = None,
+        budget_bytes: int | None = None, devices: Sequence | None = None) -> Run:
+    """Evaluate a bake in ``modes`` (any of ``shacc_jax.ALL_MODES``, in the order of the
+    result's mode axis): :func:`plan`, then :func:`execute`. The ``optimized`` mode
+    runs its search first (``shacc_jax.optimize``), then shacc's rules on the spaces it
+    found, from the scene's usual starts.
+
+    :param baked: a bake, (S, ...) arrays.
+    :param points: P bakes of the same scenes that differ only in rollout settings:
+        one call with a points axis (with ``optimized``, each point searches on its own).
+    :param fields: the Rollouts fields to copy back (default all; the others None).
+    :param metrics: compute the per-scene metrics (else None).
+    :param found: a search already run for these scenes (its parameters are used).
+    :param budget_bytes: the memory budget, ``devices`` the devices (:func:`plan`).
+    :returns: a :class:`Run`: the Evaluation as NumPy arrays, (S, M, N, T) rollouts and
+        (S, M) metrics, or (P, S, M, ...) with points; and the search.
+
+    Example::
+
+        out = shacc_jax.run(bake(results), ("baseline", "shacc", "optimized"))
+        out.evaluation.metrics.u_scene      # (S, 3)
+        out.search.q                        # the optimized mode's parameters
+    """
+    modes = tuple(modes)
+    bad = [m for m in modes if m not in (*MODES, OPTIMIZED)]
+    if bad or not modes or len(set(modes)) != len(modes):
+        raise ValueError(f"modes must be distinct names from {(*MODES, OPTIMIZED)}, "
+                         f"got {modes}")
+    for b in points or ():  # a grouping error would evaluate one point on another's spaces
+        for name in _GEOMETRY_FIELDS:
+            if not np.array_equal(getattr(b, name), getattr(baked, name)):
+                raise ValueError(f"run: the points differ from the bake in {name}")
+    options: dict[str, Any] = {"fields": fields, "metrics": metrics,
+                               "budget_bytes": budget_bytes, "devices": devices}
+    if points is not None and (OPTIMIZED in modes or len(points) == 1):
+        # Each point on its own (the search depends on the rollout settings; one point
+        # needs no points axis), stacked.
+        runs = [run(b, modes, **options) for b in points]
+        stacked = jax.tree.map(lambda *xs: None if xs[0] is None else np.stack(xs),
+                               *[r.evaluation for r in runs],
+                               is_leaf=lambda x: x is None)
+        searches: list[Any] = [r.search for r in runs]
+        return Run(stacked, searches if OPTIMIZED in modes else None)
+    plain = tuple(m for m in modes if m != OPTIMIZED)
+    parts: dict[str, tuple[Evaluation, int]] = {}
+    if plain:
+        ev = execute(plan(baked, plain, points=points, **options), baked, points)
+        parts.update({m: (ev, i) for i, m in enumerate(plain)})
+    if OPTIMIZED in modes:
+        from .optimize import optimized_spaces, search, search_sizes
+
+        if found is None:
+            try:
+                search_sizes(baked)
+            except ValueError as e:
+                raise InputError("<batch>", "optimize_population/optimize_generations",
+                                 str(e)) from None
+            found = search(baked, search_scenes_per_call(baked, budget_bytes))
+        center, dims = optimized_spaces(baked, found)
+        best = replace(baked, center_opt=center, dims_opt=dims)
+        parts[OPTIMIZED] = (execute(plan(best, ("shacc",), **options), best), 0)
+    return Run(_join_modes(parts, modes), found)
+
+
+def _join_modes(parts: dict[str, tuple[Evaluation, int]], modes: tuple[str, ...]
+                ) -> Evaluation:
+    """One evaluation whose mode axis is ``modes``, from mode -> (evaluation, index):
+    the evaluation itself when it already holds the modes in that order."""
+    ev0 = parts[modes[0]][0]
+    if all(parts[m][0] is ev0 and parts[m][1] == i for i, m in enumerate(modes)) and \
+            np.shape(ev0.rollouts.outcome)[-3] == len(modes):
+        return ev0
+    axis = np.ndim(ev0.rollouts.outcome) - 3  # the mode axis: (..., S, M, N, T)
+
+    def pick(get):
+        if get(ev0) is None:  # a field not copied back
+            return None
+        return np.concatenate([np.take(np.asarray(get(parts[m][0])), [parts[m][1]], axis=axis)
+                               for m in modes], axis=axis)
+
+    rollouts = Rollouts._make(pick(lambda e, k=k: e.rollouts[k])
+                              for k in range(len(Rollouts._fields)))
+    metrics = None if ev0.metrics is None else SceneMetrics._make(
+        pick(lambda e, k=k: e.metrics[k]) for k in range(len(SceneMetrics._fields)))
+    return Evaluation._make((rollouts, metrics))
