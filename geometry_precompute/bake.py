@@ -32,7 +32,7 @@ from . import schema
 from .bodies import object_body
 from .errors import InputError
 from .precompute import PrecomputeResult
-from .schema import KIND_CODES, MAX_PARAMS
+from .schema import KIND_CODES, MAX_PARAMS, batch_layout
 from .starts import optimize_start_poses, start_plane, start_poses
 from .templates import TaskSpace
 
@@ -117,23 +117,6 @@ class BakedScenes:
                samples_per_block: int = 16) -> schema.Layout:
         """The batch's static layout, read off the arrays once, in NumPy."""
         return batch_layout(self, modes, lanes_per_block, samples_per_block)
-
-
-def batch_layout(arrays, modes=schema.MODES, lanes_per_block: int | None = None,
-                 samples_per_block: int = 16) -> schema.Layout:
-    """:class:`~geometry_precompute.schema.Layout` of any object with the schema's
-    GEOMETRY and PARAMS fields (NumPy arrays; PARAMS may carry a leading axis of sweep
-    points)."""
-    yaw = np.asarray(arrays.yaw_meta)
-    collide = bool(np.asarray(arrays.collision).any())
-    boxes = collide and bool((np.asarray(arrays.obj_mask)
-                              & (np.asarray(arrays.obj_kind) == schema.BOX)).any())
-    return schema.Layout(
-        n_tasks=arrays.task_mask.shape[-1], n_starts=arrays.starts.shape[-2],
-        n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
-        meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
-        collision_checks=collide, box_objects=boxes, lanes_per_block=lanes_per_block,
-        samples_per_block=samples_per_block)
 
 
 def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> BakedScenes:

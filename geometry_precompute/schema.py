@@ -13,10 +13,10 @@ apart from the state for the same reason):
   leading axis of sweep points, (P, S), evaluates P settings over one geometry in
   one call. Leaves, so new values never recompile.
 - **Layout** (:class:`Layout`): hashable and static, computed once in NumPy by the
-  bake (``BakedScenes.layout``): padded sizes, the modes, which meta-target formula
-  the scenes need, whether the program checks collisions and has box slots, and the
-  lane scheduler's block sizes. It decides the compiled program, so a chunk's mix
-  of scenes changes it only through fields one can read.
+  bake (``BakedScenes.layout``, :func:`batch_layout`): padded sizes, the modes, which
+  meta-target formula the scenes need, whether the program checks collisions and has
+  box slots, and the lane scheduler's block sizes. It decides the compiled program, so
+  a chunk's mix of scenes changes it only through fields one can read.
 """
 
 from __future__ import annotations
@@ -177,3 +177,22 @@ class Layout:
         if self.lanes_per_block is not None and int(self.lanes_per_block) < 1:
             raise ValueError(f"Layout.lanes_per_block must be >= 1 or None, got "
                              f"{self.lanes_per_block}")
+
+
+def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
+                 samples_per_block: int = 16) -> Layout:
+    """:class:`Layout` of any object with the schema's
+    GEOMETRY and PARAMS fields (NumPy arrays; PARAMS may carry a leading axis of sweep
+    points)."""
+    import numpy as np  # here: the rest of the schema is plain Python
+
+    yaw = np.asarray(arrays.yaw_meta)
+    collide = bool(np.asarray(arrays.collision).any())
+    boxes = collide and bool((np.asarray(arrays.obj_mask)
+                              & (np.asarray(arrays.obj_kind) == BOX)).any())
+    return Layout(
+        n_tasks=arrays.task_mask.shape[-1], n_starts=arrays.starts.shape[-2],
+        n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
+        meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
+        collision_checks=collide, box_objects=boxes, lanes_per_block=lanes_per_block,
+        samples_per_block=samples_per_block)

@@ -37,7 +37,7 @@ from jaxtyping import Array, Bool, Float, Int
 from . import quaternion as quat
 from . import shapes
 from .orientation import task_orientation
-from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG
+from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG, Geometry, Params
 
 TIE = 1e-6
 
@@ -211,3 +211,29 @@ def delta_r(outcome: Outcome, r: Float[Array, "4"], orient, target: Int[Array, "
     """the Automaton's delta_R, for successes only (NaN otherwise)."""
     d = quat.angle(r, target_orientation(orient, target, outcome.point))
     return jnp.where(outcome.code == SUCCESS, d, jnp.nan)
+
+
+def rollout_numbers(params: Params, dtype) -> dict:
+    """One scene's settings as the kernels use them: tau, the step length v_max dt,
+    max_steps, tau widened by the rounding slack, the largest turn per step."""
+    tau = params.activation_tol
+    return dict(tau=tau, step_length=params.v_max * params.dt, max_steps=params.max_steps,
+                grow=tau + rounding_slack(dtype), max_angle=params.omega_max * params.dt)
+
+
+def activation_pass(geometry: Geometry, params: Params, which: str):
+    """Phase 1 for one scene: (path, activation, outcome), each (N, T, ...), on the
+    ``init`` or ``opt`` spaces."""
+    x = rollout_numbers(params, geometry.starts.dtype)
+    spaces = geometry.spaces(which)
+
+    def one(p0, target):
+        path = straight_path(spaces, target, p0, x["step_length"], x["max_steps"])
+        act = first_activation(spaces, geometry.task_mask, path, x["tau"], x["max_steps"],
+                               x["grow"])
+        out = classify(act, target, path, x["max_steps"], params.ambiguity_nearest)
+        return path, act, out
+
+    T = geometry.task_mask.shape[0]
+    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3],
+                                                         jnp.arange(T, dtype=jnp.int32))

@@ -40,30 +40,6 @@ from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rol
 COLLISION_BLOCK_SHARE = {"cpu": 1, None: 2}
 
 
-def _numbers(params: Params, dtype):
-    tau = params.activation_tol
-    return dict(tau=tau, step_length=params.v_max * params.dt, max_steps=params.max_steps,
-                grow=tau + am.rounding_slack(dtype), max_angle=params.omega_max * params.dt)
-
-
-def activation_pass(geometry: Geometry, params: Params, which: str):
-    """Phase 1 for one scene: (path, activation, outcome), each (N, T, ...), on the
-    ``init`` or ``opt`` spaces."""
-    x = _numbers(params, geometry.starts.dtype)
-    spaces = geometry.spaces(which)
-
-    def one(p0, target):
-        path = am.straight_path(spaces, target, p0, x["step_length"], x["max_steps"])
-        act = am.first_activation(spaces, geometry.task_mask, path, x["tau"], x["max_steps"],
-                                  x["grow"])
-        out = am.classify(act, target, path, x["max_steps"], params.ambiguity_nearest)
-        return path, act, out
-
-    T = geometry.task_mask.shape[0]
-    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3],
-                                                         jnp.arange(T, dtype=jnp.int32))
-
-
 def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
              prep: tracking.Prepared | None, collide: bool):
     """Per lane (L = S N T, in lane order): the meta window (tracking) and the collision
@@ -81,7 +57,7 @@ def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
     init = prep.init if prep is not None else None
 
     def per_scene(g, p, path, k_act, init, bounds):
-        x = _numbers(p, dtype)
+        x = am.rollout_numbers(p, dtype)
 
         def one(start, path, k_act):
             if init is not None:
@@ -320,9 +296,9 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     lanes_per_block = layout.lanes_per_block or lanes_per_block_default(jax.default_backend())
     passes = {}
     if "baseline" in modes:
-        passes["init"] = jax.vmap(partial(activation_pass, which="init"))(geometry, params)
+        passes["init"] = jax.vmap(partial(am.activation_pass, which="init"))(geometry, params)
     if "shrinking" in modes or "shacc" in modes:
-        passes["opt"] = jax.vmap(partial(activation_pass, which="opt"))(geometry, params)
+        passes["opt"] = jax.vmap(partial(am.activation_pass, which="opt"))(geometry, params)
     S_all, N = geometry.starts.shape[:2]
     T = geometry.task_mask.shape[1]
     r0 = jnp.broadcast_to(geometry.starts[:, :, None, 3:], (S_all, N, T, 4))

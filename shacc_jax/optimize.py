@@ -43,7 +43,7 @@ from geometry_precompute import schema
 
 from . import program_cache, shapes
 from . import quaternion as quat
-from .evaluation import activation_pass
+from .automaton import activation_pass
 from .types import SUCCESS, AnyArray, Geometry, Params, Search, SearchProblem
 
 SIGMA0 = 0.3  # CMA-ES's initial step, in units of each parameter's range

@@ -44,6 +44,7 @@ from geometry_precompute.schema import (
     OPTIMIZED,
     PARAMS,
     Layout,
+    batch_layout,
     lanes_per_block_default,
 )
 
@@ -231,8 +232,6 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         p = shacc_jax.plan(bake(results), budget_bytes=2**30, devices=["cpu:0"])
         p.pieces, p.layout.lanes_per_block
     """
-    from geometry_precompute.bake import batch_layout
-
     backend = backend or jax.default_backend()
     if devices is None:
         # An accelerator's devices each add their own compute; a CPU's devices

@@ -30,6 +30,7 @@ from geometry_precompute.schema import (  # noqa: F401  (re-exported)
     TIMEOUT,
     WRONG,
     Layout,
+    batch_layout,
 )
 
 from .shapes import prepare_all
@@ -198,8 +199,6 @@ def inputs(baked, modes=MODES, dtype=None, lanes_per_block: int | None = None,
         ev = shacc_jax.evaluate(geometry, params, layout)
         ev.metrics.u_scene          # (S, M) success per scene and mode
     """
-    from geometry_precompute.bake import batch_layout
-
     return (Geometry.from_bake(baked, dtype), Params.from_bake(baked, dtype),
             batch_layout(baked, modes, lanes_per_block, samples_per_block))
 

@@ -14,7 +14,7 @@ same tables.
   size rounded up to a bucket: four per octave, so chunk sizes a few percent apart
   share a program), one task count and one object count (the most any scene of the
   source can have). What else the static layout holds is read off the chunk's
-  arrays (``geometry_precompute.bake.batch_layout``): the meta formula (every random
+  arrays (``geometry_precompute.schema.batch_layout``): the meta formula (every random
   scene's meta skill takes the closed form for horizontal approaches, so a random
   sweep has one) and the collision branches. A sweep compiles one program per group
   size and layout, and a later sweep of similar chunk size and task range loads it
