@@ -36,6 +36,7 @@ from geometry_precompute.schema import BOX
 
 from . import automaton as am
 from . import quaternion as quat
+from .shapes import slab_interval
 
 PENETRATION_EPS = 1e-4  # m: a penetration deeper than this is a collision
 # Slack of the path cull (m): far above float32 rounding of metre-scale coordinates.
@@ -319,17 +320,6 @@ def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
     return deepest(objects, p, q, dims) < -PENETRATION_EPS
 
 
-def _linear_interval(a, b, lo, hi):
-    """The t with lo <= a t + b <= hi, as (from, to); empty when from > to."""
-    inf = jnp.asarray(jnp.inf, b.dtype)
-    flat = jnp.abs(a) <= _TINY
-    safe = jnp.where(flat, 1.0, a)
-    t1, t2 = (lo - b) / safe, (hi - b) / safe
-    inside = (b >= lo) & (b <= hi)
-    return (jnp.where(flat, jnp.where(inside, -inf, inf), jnp.minimum(t1, t2)),
-            jnp.where(flat, jnp.where(inside, inf, -inf), jnp.maximum(t1, t2)))
-
-
 def _line_sphere(u, c, rho):
     """The t with |t u - c| <= rho (u a unit vector or zero)."""
     inf = jnp.asarray(jnp.inf, rho.dtype)
@@ -364,7 +354,7 @@ def _line_capsule(u, a, e, rho):
     ok = (A > _TINY) & (disc >= 0)  # near-parallel lines: the end spheres cover them
     safe = jnp.where(ok, A, 1.0)
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
-    s_lo, s_hi = _linear_interval(ua, -aa, 0.0, length)
+    s_lo, s_hi = slab_interval(-aa, ua, 0.0, length)
     lo_c = jnp.maximum(jnp.where(ok, (B - root) / safe, inf), s_lo)
     hi_c = jnp.minimum(jnp.where(ok, (B + root) / safe, -inf), s_hi)
     body = lo_c <= hi_c
@@ -388,9 +378,9 @@ def _line_rounded_parallelogram(u, c0, e1, e2, rho):
     safe = jnp.where(flat, area, 1.0)[..., None]
     n = n / safe
     m1, m2 = jnp.cross(e2, n) / safe, jnp.cross(n, e1) / safe  # dual basis of the face
-    f_lo, f_hi = _linear_interval(_dot(u, n), -_dot(c0, n), -rho, rho)
+    f_lo, f_hi = slab_interval(-_dot(c0, n), _dot(u, n), -rho, rho)
     for m in (m1, m2):
-        l, h = _linear_interval(_dot(u, m), -_dot(c0, m), 0.0, 1.0)
+        l, h = slab_interval(-_dot(c0, m), _dot(u, m), 0.0, 1.0)
         f_lo, f_hi = jnp.maximum(f_lo, l), jnp.minimum(f_hi, h)
     face = flat & (f_lo <= f_hi)
     return (jnp.minimum(lo, jnp.where(face, f_lo, inf)),

@@ -197,7 +197,10 @@ def project(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, "3"]:
 # --------------------------------------------------------------------------------------
 
 
-def _slab(o: Array, d: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+def slab_interval(o: Array, d: Array, lo, hi) -> tuple[Array, Array]:
+    """The t with lo <= o + t d <= hi, as (from, to), elementwise; empty (from > to)
+    when d is parallel to the slab (|d| < 1e-12) and o lies outside it, everything when
+    inside. The ray intervals of the shapes and the gripper's path cull use it."""
     big = jnp.asarray(jnp.inf, o.dtype)
     par = jnp.abs(d) < 1e-12
     ds = jnp.where(par, 1.0, d)
@@ -258,7 +261,7 @@ def _ray_cylinder(o, d, r, h, grow):
     # Inside the infinite cylinder: -(A t^2 + 2 B t + C) >= 0.
     lo1, hi1, lo2, hi2 = _quadratic_ge0(-A, -B, -C)
     a, b = _hull_of_two(lo1, hi1, lo2, hi2)
-    za, zb = _slab(o[2], d[2], -h / 2 - grow, h / 2 + grow)
+    za, zb = slab_interval(o[2], d[2], -h / 2 - grow, h / 2 + grow)
     return _cap(a, b, za, zb)
 
 
@@ -271,14 +274,14 @@ def _ray_cone(o, d, length, trig, grow):
     C = k2 * oz * oz - o[0] ** 2 - o[1] ** 2
     lo1, hi1, lo2, hi2 = _quadratic_ge0(A, B, C)
     # Keep the upper nappe (z >= z0) and the base slab; hull of what is left.
-    za, zb = _slab(o[2], d[2], z0, length + grow)
+    za, zb = slab_interval(o[2], d[2], z0, length + grow)
     a1, b1 = _cap(lo1, hi1, za, zb)
     a2, b2 = _cap(lo2, hi2, za, zb)
     return _hull_of_two(a1, b1, a2, b2)
 
 
 def _ray_box(o, d, e, grow):
-    a, b = _slab(o, d, -e - grow, e + grow)
+    a, b = slab_interval(o, d, -e - grow, e + grow)
     return jnp.max(a), jnp.min(b)
 
 
