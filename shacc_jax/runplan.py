@@ -32,6 +32,7 @@ import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 from typing import Any, NamedTuple
 
 import jax
@@ -72,17 +73,16 @@ _PARAM_FIELDS = tuple(f.name for f in PARAMS)
 class RunPlan:
     """How one evaluation runs, decided before anything is traced (:func:`plan`).
 
-    ``layout``: the compiled program's static side, its block size resolved for the
-    backend. ``n_scenes``, ``n_starts``: the bake's S and N. ``n_points``: P sweep
-    points over one geometry (None: Params of shape (S,)). ``pieces``: the first start
-    of each piece of the start grid, ``starts_per_piece`` starts each (the last piece
-    padded by repeating the grid's last start, so every piece has one shape and one
-    program). ``devices``: where the scene parts run, one host thread each;
+    ``layout``: the compiled program's static side, its block size resolved for the backend
+    and its ``n_starts`` that of one piece. ``n_scenes``, ``n_starts``: the bake's S and N.
+    ``n_points``: P sweep points over one geometry (None: Params of shape (S,)). ``pieces``:
+    the first start of each piece of the start grid, ``starts_per_piece`` starts each (the
+    last piece padded by repeating the grid's last start, so every piece has one shape and
+    one program). ``devices``: where the scene parts run, one host thread each;
     ``scenes_per_part`` scenes each, the scenes padded by repeating the last one to
-    ``padded_scenes``. ``fields``: the Rollouts fields copied to the host (the others
-    stay None). ``metrics``: whether :func:`execute` computes the per-scene metrics.
-    ``bytes_per_piece`` of the ``budget`` (bytes), the estimate that chose the
-    pieces."""
+    ``padded_scenes``. ``fields``: the Rollouts fields copied to the host (the others stay
+    None). ``metrics``: whether :func:`execute` computes the per-scene metrics.
+    ``bytes_per_piece`` of the ``budget`` (bytes), the estimate that chose the pieces."""
 
     layout: Layout
     n_scenes: int
@@ -244,8 +244,6 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     S, N, T = baked.task_mask.shape[0], baked.starts.shape[1], baked.task_mask.shape[1]
     modes = tuple(modes)
     P = None if points is None else len(points)
-    collision = bool(np.any(baked.collision)) if points is None else \
-        any(bool(np.any(p.collision)) for p in points)
     if points is None:
         layout = batch_layout(baked, modes)
     else:
@@ -253,10 +251,11 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         # point has them on.
         arrays = {k: getattr(baked, k) for k in _GEOMETRY_FIELDS}
         arrays.update(_stacked_params(points)._asdict())
-        layout = batch_layout(_Arrays(arrays), modes)
+        layout = batch_layout(SimpleNamespace(**arrays), modes)
     layout = replace(layout, lanes_per_block=layout.lanes_per_block
                      or lanes_per_block_default(backend))
-    per_start = bytes_per_rollout(collision, backend) * S * T * len(modes) * (P or 1)
+    per_start = (bytes_per_rollout(layout.collision_checks, backend)
+                 * S * T * len(modes) * (P or 1))
     # At least two starts in every program, even a one-start grid (padded by repeating
     # it): where an axis has length one, XLA simplifies the arithmetic around it
     # differently, and a rollout's last bits would depend on its piece.
@@ -275,13 +274,6 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
                    devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
                    padded_scenes=per_part * len(devices), fields=_fields(fields),
                    metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
-
-
-class _Arrays:
-    """Attribute access to a dict of arrays (what ``batch_layout`` reads)."""
-
-    def __init__(self, arrays: dict):
-        self.__dict__.update(arrays)
 
 
 def _pad(a: np.ndarray, n: int, axis: int) -> np.ndarray:
