@@ -26,12 +26,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
+    from geometry_precompute.batch import precompute_batch
     from sweeps import compile_cache
     from sweeps.cluster import connect
     from sweeps.config import parse_config
     from sweeps.evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk, join_chunk
     from sweeps.plan import plan, precompute_batches, shapes
-    from sweeps.workers import precompute_batch
 
     compile_cache.enable()
     cfg = parse_config({"name": "chunk", "chunk": args.scenes, "source": {

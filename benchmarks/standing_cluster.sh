@@ -6,7 +6,7 @@
 #   again  - the same scenes: precompute cache warm, the program in the worker's memory;
 #   again2 - once more.
 # Prints each run's wall time (the whole command) and its JSON summary. Extra options
-# for every `dask worker` in $WORKER_OPTIONS (e.g. "--preload sweeps.cluster").
+# for every `dask worker` in $WORKER_OPTIONS (e.g. "--preload sweeps.worker_setup").
 #   bash benchmarks/standing_cluster.sh [CONFIG] [WORKERS]
 set -euo pipefail
 config=${1:-benchmarks/e2e_10k.toml}

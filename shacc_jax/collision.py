@@ -50,24 +50,6 @@ def _dot(u, v):
     return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
 
 
-def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
-                  dims: Float[Array, "4"]) -> tuple[Array, Array, Array]:
-    """Centres (3, 3), rotation matrices (3, 3, 3) and MuJoCo capsule sizes (3, 2)
-    [radius, half length] of the fingers and the palm. ``dims`` is
-    [finger_length, finger_radius, opening, palm_radius]."""
-    length, r_f, opening, r_p = dims[0], dims[1], dims[2], dims[3]
-    R = quat.to_matrix(q)
-    x, y, z = R[:, 0], R[:, 1], R[:, 2]
-    centres = jnp.stack([p + 0.5 * opening * y - 0.5 * length * z,
-                         p - 0.5 * opening * y - 0.5 * length * z,
-                         p - length * z])
-    palm = jnp.stack([x, -z, y], axis=1)  # local z along the EE's y axis
-    mats = jnp.stack([R, R, palm])
-    sizes = jnp.stack([jnp.stack([r_f, 0.5 * length]), jnp.stack([r_f, 0.5 * length]),
-                       jnp.stack([r_p, 0.5 * opening])])
-    return centres, mats, sizes
-
-
 def gripper_reach(dims: Float[Array, "4"]) -> Array:
     """Radius of a sphere about p that contains the whole gripper."""
     length, r_f, opening, r_p = dims[0], dims[1], dims[2], dims[3]
@@ -150,11 +132,10 @@ def pair_axes(objects, p: Float[Array, "3"], q: Float[Array, "4"],
     (3, O, 3) and extents (3, O, 3), as segments a + t d, t in [0, 1]; and the
     capsules' radii (3,). ``objects``: :func:`scene_objects`' output."""
     _, centre, mat, _, _ = objects
-    g_pos, g_mat, g_size = gripper_geoms(p, q, dims)
-    axis = g_mat[:, :, 2] * g_size[:, 1:2]  # (3, 3): half the capsule's axis
-    a_loc = _into_frames(mat[None], (g_pos - axis)[:, None, :] - centre[None, :, :])
-    d_loc = _into_frames(mat[None], 2.0 * axis[:, None, :])
-    return a_loc, d_loc, g_size[:, 0]
+    starts, extents, radii = capsule_segments(p, q, dims)
+    a_loc = _into_frames(mat[None], starts[:, None, :] - centre[None, :, :])
+    d_loc = _into_frames(mat[None], extents[:, None, :])
+    return a_loc, d_loc, radii
 
 
 def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"],
@@ -200,12 +181,24 @@ def _lower_bound_xyz(a, d, kind, size):
     return jnp.where(kind == BOX, box, jnp.sqrt(gap_r * gap_r + gap_z * gap_z))
 
 
-def _capsule_axes_xyz(p, q, dims):
-    """The gripper's capsule axes at poses (p, q) (..., 3), (..., 4) as segments
-    start + t extent, t in [0, 1], in world coordinates, with their radii: three
-    (start, extent, radius), start and extent (x, y, z) tuples; the same capsules as
-    :func:`gripper_geoms` (the MuJoCo layout, which stays the definition; a test holds
-    the two equal), written elementwise (``dims`` (..., 4) broadcasts)."""
+def capsule_axes(p, q, dims):
+    """The gripper's three capsules at poses (p, q) (..., 3), (..., 4): the one
+    definition, which every check, the path cull and the pictures use. Each capsule
+    is (start, extent, radius): its axis is the segment start + t extent, t in [0, 1],
+    in world coordinates, start and extent (x, y, z) tuples. The fingers run from the
+    palm (EE z = -finger_length) to the tool centre point, at EE y = +-opening/2; the
+    palm runs across them along EE y. Written elementwise (``dims`` (..., 4):
+    [finger_length, finger_radius, opening, palm_radius], broadcasts), so that the
+    fused pair check computes it without (..., 3) intermediates.
+
+    >>> import jax.numpy as jnp
+    >>> (s, e, r), _, (ps, pe, pr) = capsule_axes(jnp.zeros(3), jnp.array([1., 0, 0, 0]),
+    ...                                          jnp.array([0.1, 0.01, 0.08, 0.02]))
+    >>> [round(float(v), 3) for v in (*s, *e, r)]
+    [0.0, 0.04, -0.1, 0.0, 0.0, 0.1, 0.01]
+    >>> [round(float(v), 3) for v in (*ps, *pe, pr)]
+    [0.0, -0.04, -0.1, 0.0, 0.08, 0.0, 0.02]
+    """
     w, x, y, z = (q[..., i] for i in range(4))
     ey = (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x))  # R[:, 1]
     ez = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))  # R[:, 2]
@@ -218,6 +211,30 @@ def _capsule_axes_xyz(p, q, dims):
              tuple(length * ez[i] for i in range(3)), r_f),
             (tuple(palm[i] - half * ey[i] for i in range(3)),
              tuple(opening * ey[i] for i in range(3)), r_p)]
+
+
+def capsule_segments(p: Float[Array, "3"], q: Float[Array, "4"],
+                     dims: Float[Array, "4"]) -> tuple[Array, Array, Array]:
+    """:func:`capsule_axes` of one pose as arrays: starts (3, 3), extents (3, 3) and
+    radii (3,), one row per capsule (the fingers, then the palm)."""
+    axes = capsule_axes(p, q, dims)
+    return (jnp.stack([jnp.stack(start) for start, _, _ in axes]),
+            jnp.stack([jnp.stack(extent) for _, extent, _ in axes]),
+            jnp.stack([radius for _, _, radius in axes]))
+
+
+def gripper_geoms(p: Float[Array, "3"], q: Float[Array, "4"],
+                  dims: Float[Array, "4"]) -> tuple[Array, Array, Array]:
+    """:func:`capsule_axes` in MuJoCo's layout (the pictures, and the tests against
+    MuJoCo): centres (3, 3), rotation matrices (3, 3, 3) whose z is each axis, and
+    capsule sizes (3, 2) [radius, half length]."""
+    starts, extents, radii = capsule_segments(p, q, dims)
+    R = quat.to_matrix(q)
+    x, y, z = R[:, 0], R[:, 1], R[:, 2]
+    palm = jnp.stack([x, -z, y], axis=1)  # local z along the EE's y axis
+    half = jnp.stack([0.5 * dims[0], 0.5 * dims[0], 0.5 * dims[2]])
+    return (starts + 0.5 * extents, jnp.stack([R, R, palm]),
+            jnp.stack([radii, half], axis=1))
 
 
 def _in_frame_xyz(mat, v):
@@ -255,7 +272,7 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
     C, O = 3, kind.shape[1]
     # Poses (B, W, 1) against objects (B, 1, O), component by component: one fused kernel
     # from the poses to the flags, no (..., 3) intermediate written to memory.
-    pose_axes = _capsule_axes_xyz(p[:, :, None, :], q[:, :, None, :], dims[:, None, None, :])
+    pose_axes = capsule_axes(p[:, :, None, :], q[:, :, None, :], dims[:, None, None, :])
     o_centre = tuple(centre[:, None, :, i] for i in range(3))
     o_mat, o_kind = mat[:, None], kind[:, None, :]
     o_size = tuple(size[:, None, :, i] for i in range(3))
@@ -296,12 +313,11 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
         pose, pair = i // (C * O), i % (C * O)
         lane, c, o = pose // W, pair // O, pair % O
         o_kind, o_centre, o_mat, o_size, _ = (x[lane, o] for x in objects)
-        g_pos, g_mat, g_size = gripper_geoms(flat_p[pose], flat_q[pose], dims[lane])
-        axis = g_mat[c, :, 2] * g_size[c, 1]
-        a_loc = _into_frames(o_mat, g_pos[c] - axis - o_centre)
-        d_loc = _into_frames(o_mat, 2.0 * axis)
+        starts, extents, radii = capsule_segments(flat_p[pose], flat_q[pose], dims[lane])
+        a_loc = _into_frames(o_mat, starts[c] - o_centre)
+        d_loc = _into_frames(o_mat, extents[c])
         dist = segment_distance(a_loc, d_loc, o_kind, o_size)
-        return pose, dist < g_size[c, 0] - PENETRATION_EPS
+        return pose, dist < radii[c] - PENETRATION_EPS
 
     def one_round(j, hit):
         slot = rank - j * K
@@ -363,10 +379,18 @@ def _line_capsule(u, a, e, rho):
     return lo, hi
 
 
-def _line_rounded_parallelogram(u, c0, e1, e2, rho):
+def line_rounded_parallelogram(u, c0, e1, e2, rho):
     """The t with dist(t u, {c0 + x e1 + y e2 : x, y in [0, 1]}) <= rho: the four edge
     capsules and the slab of thickness 2 rho over the parallelogram's face. Convex, so
-    one interval (from, to), empty when from > to."""
+    one interval (from, to), empty when from > to. (The path cull's set of steps at
+    which a capsule axis, moved along u, comes within rho of another.)
+
+    >>> import jax.numpy as jnp
+    >>> lo, hi = line_rounded_parallelogram(jnp.array([1., 0, 0]), jnp.array([1., 0, 0]),
+    ...     jnp.array([0., 1, 0]), jnp.array([0., 0, 1]), jnp.asarray(0.5))
+    >>> round(float(lo), 3), round(float(hi), 3)
+    (0.5, 1.5)
+    """
     inf = jnp.asarray(jnp.inf, rho.dtype)
     lo, hi = inf, -inf
     for a, e in ((c0, e1), (c0 + e2, e1), (c0, e2), (c0 + e1, e2)):
@@ -432,15 +456,14 @@ def path_window(bounds: Bounds, obj_center, obj_mask, gripper: Float[Array, "4"]
     dtype = path.length.dtype
     inf = jnp.asarray(jnp.inf, dtype)
     start, extent, radius, sphere = bounds
-    g_pos, g_mat, g_size = gripper_geoms(path.p0, r0, gripper)
-    axis = g_mat[:, :, 2] * g_size[:, 1:2]
+    g_start, g_extent, g_radius = capsule_segments(path.p0, r0, gripper)
     # Pairs (capsules, objects): t u within rho of the parallelogram of axis offsets.
-    c0 = start[None, :, :] - (g_pos - axis)[:, None, :]
-    rho = g_size[:, 0:1] + radius[None, :] + CULL_MARGIN
-    lo, hi = _line_rounded_parallelogram(jnp.broadcast_to(path.u, c0.shape), c0,
-                                         jnp.broadcast_to(extent, c0.shape),
-                                         jnp.broadcast_to(-2.0 * axis[:, None, :], c0.shape),
-                                         rho)
+    c0 = start[None, :, :] - g_start[:, None, :]
+    rho = g_radius[:, None] + radius[None, :] + CULL_MARGIN
+    lo, hi = line_rounded_parallelogram(jnp.broadcast_to(path.u, c0.shape), c0,
+                                        jnp.broadcast_to(extent, c0.shape),
+                                        jnp.broadcast_to(-g_extent[:, None, :], c0.shape),
+                                        rho)
     lo, hi = jnp.where(obj_mask[None, :], lo, inf), jnp.where(obj_mask[None, :], hi, -inf)
     zero = jnp.zeros((), dtype)
     first = jnp.min(am.first_sample(lo, hi, zero, path, max_steps), axis=0)

@@ -19,8 +19,8 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-# Nothing heavy here (NumPy and the rest come with main's imports): `shacc sweep` starts
-# its local cluster's fork server before them (main).
+# Nothing heavy here, nor in the parser (NumPy and the rest come with each command's
+# module): `shacc sweep` starts its local cluster's fork server before them (_run).
 from . import compile_cache
 
 
@@ -231,19 +231,6 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 _default_showwarning = warnings.showwarning
 
 
-def _local_sweep(argv: Sequence[str]) -> bool:
-    """Whether the command line asks for a sweep on a local cluster, read before the
-    parser (which imports the schema, and NumPy with it). Options are recognised as
-    argparse does, abbreviated too (``--dry``, ``--sched=ADDRESS``). A wrong guess
-    costs only time: an unused fork server ends with this process, and a local
-    cluster starts its own when none was started."""
-    def given(option: str) -> bool:
-        return any(len(name) > 2 and option.startswith(name)
-                   for name in (a.split("=", 1)[0] for a in argv[1:] if a.startswith("--")))
-
-    return argv[:1] == ["sweep"] and not given("--dry-run") and not given("--scheduler")
-
-
 def entry() -> None:
     """The ``shacc`` console script: Ctrl-C handled from the first moment
     (``interrupt``), then :func:`main`."""
@@ -278,15 +265,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(argv: list[str]) -> int:
-    if _local_sweep(argv):
-        # First thing, before this process imports NumPy, dask and the rest: the local
-        # cluster's fork server imports the workers' modules meanwhile (a config that
-        # names a scheduler leaves the server unused; it ends with this process).
+    warnings.showwarning = _show_warning
+    args = build_parser().parse_args(argv)  # imports neither NumPy nor dask
+    if args.command == "sweep" and not (args.dry_run or args.scheduler):
+        # Before this process imports NumPy, dask and the rest: the local cluster's fork
+        # server imports the workers' modules meanwhile (a config that names a scheduler
+        # leaves the server unused; it ends with this process).
         from .cluster import start_fork_server
 
         start_fork_server()
-    warnings.showwarning = _show_warning
-    args = build_parser().parse_args(argv)
     # The sweep's evaluation workers turn the cache on for themselves; its client
     # process never loads JAX.
     if args.command in ("evaluate", "optimize", "reproduce", "render"):

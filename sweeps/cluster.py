@@ -2,19 +2,21 @@
 
 Two kinds of worker, told apart by Dask resources:
 
-- ``precompute``: one thread per CPU core, no JAX (``sweeps.workers``);
+- ``precompute``: one thread per CPU core, no JAX (``geometry_precompute.batch``);
 - ``evaluate``: one per GPU, pinned to it (``CUDA_VISIBLE_DEVICES``), or one on the
   CPU where there is no GPU (``sweeps.evaluation_worker``).
 
-By default :func:`connect` starts a local cluster of both kinds in this process (the
-scheduler and the nannies run in its event loop; each worker is a process of its own,
-forked from a server that has imported the workers' modules once,
-:func:`start_fork_server`) and closes it when the sweep ends, also on Ctrl-C and on
-errors. Worker processes die with this process even when it is killed with SIGKILL:
-distributed's nanny hands each a pipe whose closing makes it exit at once, and the fork
-server exits when the last of them has. Each evaluation worker starts its warm-up (JAX,
-the accelerator, the first chunk's program) with its process
-(``evaluation_worker.start_early_warm_up``), while the other workers start.
+By default :func:`connect` starts a local cluster in this process (the scheduler and
+the nannies run in its event loop; each worker is a process of its own, forked from a
+server that has imported the workers' modules once, :func:`start_fork_server`) and
+closes it when the command ends, also on Ctrl-C and on errors. It is the one place
+where shacc starts processes: ``shacc sweep`` and ``shacc reproduce`` (precompute
+workers only) both start their workers here. Each worker is set up by one Dask plugin
+(``worker_setup.WorkerSetup``: SIGINT ignored, the precompute at nice 5, the
+evaluation worker's warm-up begun with its process); its environment (its GPU, the
+allocator) is its nanny's. Worker processes die with this process even when it is
+killed with SIGKILL: distributed's nanny hands each a pipe whose closing makes it exit
+at once, and the fork server exits when the last of them has.
 
 Given a scheduler address, it connects to an existing cluster instead, which it
 neither starts nor stops. Workers started with ``--resources precompute=1`` take the
@@ -28,7 +30,6 @@ import contextlib
 import logging
 import os
 import shutil
-import signal
 import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -154,27 +155,6 @@ def local_gpus() -> list[str]:
             if line.startswith("GPU ")]
 
 
-def dask_setup(worker) -> None:
-    """Preloaded into every local worker process: Ctrl-C reaches the whole process group,
-    and the command, not each worker, decides what it means (the cluster is closed).
-    The precompute workers run at a lower priority (nice 5): with one per core, they
-    would otherwise take CPU time from the evaluation worker's compilation and from the
-    host loop that drives the accelerator, which every chunk waits on. An evaluation
-    worker given a warm-up (``evaluation_worker.WARM_UP_ENV``) starts it in a thread
-    here. (Only starting JAX here, in the foreground or in a thread, made the sweep no
-    faster; the whole warm-up, with the fork server, did: benchmarks/RESULTS.md.)"""
-    with contextlib.suppress(ValueError):  # not the main thread: nothing to do
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if PRECOMPUTE in (worker.state.total_resources or {}):
-        with contextlib.suppress(OSError):
-            os.nice(5)
-    elif EVALUATE in (worker.state.total_resources or {}):
-        from .evaluation_worker import WARM_UP_ENV, start_early_warm_up
-
-        if os.environ.get(WARM_UP_ENV):
-            start_early_warm_up(os.environ[WARM_UP_ENV])
-
-
 # What every local worker imports, loaded once in the fork server (below) rather than by
 # each new interpreter. Kept short: the server imports one module after another, and a
 # long list (pandas, pyarrow, scipy, the mesh libraries) made the workers start later
@@ -182,8 +162,8 @@ def dask_setup(worker) -> None:
 # the H100 hosts) joined once `shacc sweep` started the server before its own imports
 # (benchmarks/RESULTS.md). Never JAX: preloaded, it made every worker start 1.4 s later
 # and the evaluation worker's warm-up end no sooner.
-FORK_PRELOAD = ("distributed", "sweeps.cluster", "sweeps.workers", "sweeps.evaluation_worker",
-                "scipy.spatial.transform")
+FORK_PRELOAD = ("distributed", "sweeps.worker_setup", "geometry_precompute.batch",
+                "sweeps.evaluation_worker", "scipy.spatial.transform")
 # What distributed's nanny sets before it starts a worker (its
 # distributed.nanny.pre-spawn-environ defaults): the fork server imports NumPy, so they
 # must be set before the server starts.
@@ -199,8 +179,8 @@ def start_fork_server() -> bool:
     when this process and every worker forked from it have ended (it waits on a pipe
     that each of them holds), SIGKILL included. False where the platform has no fork
     server: the workers are then spawned, each importing anew. This module imports
-    nothing heavy, so that ``shacc sweep`` can start the server before it imports
-    NumPy, dask and the rest."""
+    nothing heavy, so that ``shacc sweep`` can start the server as soon as its
+    arguments are parsed, before it imports NumPy, dask and the rest."""
     import multiprocessing
     import multiprocessing.forkserver
 
@@ -225,35 +205,44 @@ def start_fork_server() -> bool:
     return method == "forkserver"
 
 
-def _local(workers: int | None, warm_up: dict) -> tuple[object, int, int]:
+def _local(workers: int | None, warm_up: tuple | None,
+           evaluate: bool) -> tuple[object, int, int]:
+    """The local cluster: ``workers`` precompute workers (default one per core) and, if
+    ``evaluate``, one evaluation worker per GPU (one on the CPU where there is none)."""
     from distributed import Nanny, Scheduler, SpecCluster
+
+    from .worker_setup import WorkerSetup
 
     start_fork_server()
     n_cpu = workers or os.cpu_count() or 1
-    gpus = local_gpus()
     # Workers log nothing below CRITICAL: a closing cluster makes them log connection
     # errors (with tracebacks) that are no error of the sweep's; task errors reach the
     # command through their futures.
-    base = {"nthreads": 1, "preload": ["sweeps.cluster"], "silence_logs": logging.CRITICAL}
+    base = {"nthreads": 1, "silence_logs": logging.CRITICAL}
     # This process's environment as it is now, as a spawned worker would inherit it (a
     # forked one has the fork server's, from when the server started).
     here = {**os.environ, **QUIET}
     spec = {f"precompute-{i}": {"cls": Nanny, "options": {
-        **base, "resources": {PRECOMPUTE: 1}, "env": here}} for i in range(n_cpu)}
-    # An evaluation worker allocates GPU memory as it needs it: reserving 75 % of an H100
-    # up front took 0.9 s of every sweep's start (benchmarks/RESULTS.md); the budget
-    # (shacc_jax.runplan) reads the allocator's limit either way. A user's setting wins.
-    alloc = {"XLA_PYTHON_CLIENT_PREALLOCATE":
-             os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE", "false")}
-    evals = [{"CUDA_VISIBLE_DEVICES": g, **alloc} for g in gpus] or [{"JAX_PLATFORMS": "cpu"}]
+        **base, "resources": {PRECOMPUTE: 1}, "env": here, "plugins": (WorkerSetup(),)}}
+        for i in range(n_cpu)}
+    evals: list[dict] = []
+    if evaluate:
+        # An evaluation worker allocates GPU memory as it needs it: reserving 75 % of an
+        # H100 up front took 0.9 s of every sweep's start (benchmarks/RESULTS.md); the
+        # budget (shacc_jax.runplan) reads the allocator's limit either way. A user's
+        # setting wins.
+        alloc = {"XLA_PYTHON_CLIENT_PREALLOCATE":
+                 os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE", "false")}
+        evals = [{"CUDA_VISIBLE_DEVICES": g, **alloc} for g in local_gpus()] \
+            or [{"JAX_PLATFORMS": "cpu"}]
     for i, env in enumerate(evals):
         spec[f"evaluate-{i}"] = {"cls": Nanny, "options": {
-            **base, "resources": {EVALUATE: 1}, "memory_limit": 0,
-            "env": {**here, **env, **warm_up}}}
+            **base, "resources": {EVALUATE: 1}, "memory_limit": 0, "env": {**here, **env},
+            "plugins": (WorkerSetup(warm_up),)}}
     # The dashboard (bokeh) is built when it is first opened (_dashboard_on_demand).
     scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0", "dashboard": False}}
     cluster = SpecCluster(workers=spec, scheduler=scheduler, silence_logs=logging.CRITICAL,
-                          name="shacc-sweep")
+                          name="shacc")
     _dashboard_on_demand(cluster)
     return cluster, n_cpu, len(evals)
 
@@ -366,11 +355,18 @@ def _client(address: str, timeout: float):
 
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None,
-            timeout: float = 60.0, warm_up: dict | None = None) -> Iterator[Pool]:
+            timeout: float = 60.0, warm_up: tuple | None = None,
+            evaluate: bool = True) -> Iterator[Pool]:
     """A :class:`Pool` on a new local cluster (``scheduler`` None; ``workers``: its
-    precompute processes, default one per core) or on the cluster at ``scheduler``.
-    ``warm_up``: environment variables of a local cluster's evaluation workers
-    (``evaluation_worker.warm_up_env``: the warm-up they start with their process)."""
+    precompute processes, default one per core; ``evaluate``: with evaluation workers)
+    or on the cluster at ``scheduler``. ``warm_up``: ``(job, scene)`` of
+    ``evaluation_worker.warm_up``, which a local cluster's evaluation workers begin as
+    they start (``worker_setup.WorkerSetup``).
+
+    >>> import inspect
+    >>> list(inspect.signature(connect).parameters)
+    ['scheduler', 'workers', 'timeout', 'warm_up', 'evaluate']
+    """
     import warnings
 
     from distributed import Client
@@ -384,7 +380,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
         # distributed warns when a port is taken (it picks another) or bokeh is missing.
         warnings.simplefilter("ignore")
         if scheduler is None:
-            cluster, n_cpu, n_eval = _local(workers, warm_up or {})
+            cluster, n_cpu, n_eval = _local(workers, warm_up, evaluate)
             client = Client(cluster)
         else:
 
@@ -395,7 +391,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
         else:
             client.wait_for_workers(n_cpu + n_eval, timeout=timeout)
             info = client.scheduler_info(n_workers=-1)["workers"]
-            pool = Pool(client, {PRECOMPUTE: 1}, {EVALUATE: 1}, n_cpu,
+            pool = Pool(client, {PRECOMPUTE: 1}, {EVALUATE: 1} if n_eval else None, n_cpu,
                         tuple(a for a, w in info.items() if w["resources"].get(EVALUATE)))
         yield pool
     finally:

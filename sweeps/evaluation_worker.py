@@ -12,10 +12,8 @@ caused are counted with JAX's monitoring events and reported.
 
 from __future__ import annotations
 
-import base64
 import functools
 import os
-import pickle
 import socket
 import threading
 import time
@@ -92,51 +90,52 @@ def _setup() -> None:
         _READY = True
 
 
-# Where a local cluster's evaluation worker finds the warm-up it is to start as soon as its
-# process starts (base64 of the pickled (ChunkJob, ref)); see start_early_warm_up.
-WARM_UP_ENV = "SHACC_WARM_UP"
-_EARLY: dict = {}  # "job": (job, thread, outcome) of the warm-up started with the process
+class EarlyWarmUp:
+    """A :func:`warm_up` begun in a thread of this process as it starts (the local
+    cluster's evaluation workers begin one: ``worker_setup.WorkerSetup``), so that JAX's
+    start, the accelerator's and the program's load or compilation overlap the start of
+    the other workers instead of beginning when the sweep's first task arrives. The
+    warm-up task of the same job waits for it and reports its result.
 
+    >>> EarlyWarmUp.__name__
+    'EarlyWarmUp'
+    """
 
-def warm_up_env(job: ChunkJob, ref, limit: int = 64 * 1024) -> dict[str, str]:
-    """The environment that has a local evaluation worker start ``warm_up(job, ref)``
-    when its process starts; empty when the job is too large for a variable."""
-    blob = base64.b64encode(pickle.dumps((job, ref))).decode()
-    return {WARM_UP_ENV: blob} if len(blob) <= limit else {}
+    def __init__(self, job: ChunkJob, ref) -> None:
+        self.job, self.ref = job, ref
+        self._outcome: dict = {}
+        self._thread = threading.Thread(target=self._run, name="shacc-warm-up", daemon=True)
 
+    def start(self) -> EarlyWarmUp:
+        self._thread.start()
+        return self
 
-def start_early_warm_up(blob: str) -> None:
-    """Run the warm-up named by ``blob`` (:func:`warm_up_env`) in a thread of this
-    process, now: JAX's start, the accelerator's and the program's loading (or
-    compilation) then overlap the start of the other workers, instead of beginning
-    when the sweep's first task arrives. The :func:`warm_up` task of the same job waits
-    for it and reports its result."""
-    job, ref = pickle.loads(base64.b64decode(blob))
-    outcome: dict = {}
-
-    def run() -> None:
+    def _run(self) -> None:
         try:
-            outcome["result"] = _warm_up(job, ref)
+            self._outcome["result"] = _warm_up(self.job, self.ref)
         except BaseException as e:  # the task reruns the warm-up and raises it there
-            outcome["error"] = e
+            self._outcome["error"] = e
 
-    thread = threading.Thread(target=run, name="shacc-warm-up", daemon=True)
-    _EARLY["job"] = (job, thread, outcome)
-    thread.start()
+    def result_for(self, job: ChunkJob) -> dict | None:
+        """Wait for it to end (also for another job: two warm-ups at once only
+        compete); its result if it warmed up ``job`` and succeeded, else None."""
+        self._thread.join()
+        return self._outcome.get("result") if job == self.job else None
 
 
-def warm_up(job: ChunkJob, ref) -> dict:
+def warm_up(job: ChunkJob, ref, early: EarlyWarmUp | None = None) -> dict:
     """Compile (or load) the program of ``job``'s chunks while their scenes are still
     being precomputed: one scene (``ref``: a Scene or ``random_scene``'s arguments) is
     precomputed here, outside any cache, and evaluated, padded to the chunk's shapes.
-    Returns the seconds it took, the programs it compiled and loaded, and whether it
-    had started with the worker's process (:func:`start_early_warm_up`)."""
-    early = _EARLY.pop("job", None)
-    if early is not None:
-        started, thread, outcome = early
-        thread.join()  # also for another job: two warm-ups at once only compete
-        if started == job and "result" in outcome:
-            return {**outcome["result"], "early": True}
+    ``early``: a warm-up begun before (default: the one this worker began as it
+    started, ``worker_setup.early_warm_up``). Returns the seconds it took, the
+    programs it compiled and loaded, and whether the early warm-up served it."""
+    if early is None:
+        from .worker_setup import early_warm_up
+
+        early = early_warm_up()
+    if early is not None and (done := early.result_for(job)) is not None:
+        return {**done, "early": True}
     return {**_warm_up(job, ref), "early": False}
 
 
@@ -172,9 +171,8 @@ def _warm_up(job: ChunkJob, ref) -> dict:
     import jax
 
     from geometry_precompute import precompute, random_scene
+    from geometry_precompute.batch import bake_batch, point_settings
     from geometry_precompute.scene import Scene
-
-    from .workers import bake_batch, point_settings
 
     WARM_UP_MARKS["imports"] = time.time()
     _setup()
@@ -221,10 +219,11 @@ class JoinedChunk:
 
 
 def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
-    """``batches``: the chunk's precompute tasks' results, in order (``workers.Batch``:
-    each point's bake of its scenes), joined into one bake per point. A CPU worker's
-    task in a sweep, so that the accelerator's worker, which evaluates the chunks one
-    after another, spends its time on the evaluations only."""
+    """``batches``: the chunk's precompute tasks' results, in order
+    (``geometry_precompute.batch.Batch``: each point's bake of its scenes), joined into
+    one bake per point. A CPU worker's task in a sweep, so that the accelerator's
+    worker, which evaluates the chunks one after another, spends its time on the
+    evaluations only."""
     t0 = time.perf_counter()
     bakes = [concatenate([b.bakes[k] for b in batches], pad_to=job.shapes.scenes)
              for k in range(len(job.points))]

@@ -15,8 +15,9 @@ is being renamed into place and no JSON is half written to stdout), removes the
 temporary files of writes under way, silences stdout, prints ``interrupted`` and ends
 the process with ``os._exit(130)``: no Python clean-up runs, nothing can run after
 the line, and the process ends as it would on SIGKILL. Worker processes end with it
-as they do then (the local cluster's fork server and ``reproduce``'s pool: every
-worker watches its parent, tested with SIGKILL and with Ctrl-C).
+as they do then (the local cluster's workers, ``sweep``'s and ``reproduce``'s, hold a
+pipe from their nanny and the fork server one from each worker: tested with SIGKILL
+and with Ctrl-C).
 
 Only the console script installs this; a Python program that calls
 ``sweeps.cli.main`` keeps Python's own KeyboardInterrupt (and ``main`` reports it as
@@ -61,7 +62,7 @@ def start_resource_tracker() -> None:
     """Start multiprocessing's resource tracker now (before the first worker process),
     writing to /dev/null, and block SIGINT again after it. Its start unblocks SIGINT
     in the calling thread, so that every process spawned afterwards (the fork server,
-    ``reproduce``'s workers) would receive Ctrl-C while it imports its modules and print
+    the workers) would receive Ctrl-C while it imports its modules and print
     a KeyboardInterrupt traceback; and once the command ends on Ctrl-C it would report
     the worker queues' semaphores as leaked, after the line ``interrupted``."""
     from multiprocessing import resource_tracker

@@ -35,6 +35,7 @@ from geometry_precompute import (
     precompute,
     shipped_scene_paths,
 )
+from geometry_precompute.batch import precompute_scene
 from shacc_jax.optimize import winner_name
 from shacc_jax.types import Search
 
@@ -43,7 +44,6 @@ from .inputs import parse_sets
 from .output import check_output_dir, check_output_file, write_atomic, write_json
 from .pipeline import evaluate_results
 from .stats import mean_ci, partial_corr_ci, pearson_ci
-from .workers import precompute_pool, precompute_scene
 
 MODES = shacc_jax.ALL_MODES
 CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos",
@@ -79,6 +79,23 @@ def _optimized_clutteredness(r: PrecomputeResult, q: np.ndarray) -> float:
     return clutteredness(shapes, r.settings["mesh_sections"])
 
 
+def _precompute(items: list, workers: int | None) -> list[PrecomputeResult]:
+    """The scenes' precompute, in order, on the local cluster's precompute workers (the
+    sweep's cluster, without evaluation workers: this process evaluates)."""
+    from distributed import as_completed
+
+    from .cluster import connect
+
+    with connect(workers=workers, evaluate=False) as pool:
+        futures = pool.client.map(precompute_scene, items, resources=pool.precompute,
+                                  pure=False)
+        for f in tqdm(as_completed(futures), total=len(items), desc="precompute",
+                      unit="scene", file=sys.stderr, disable=None):
+            if f.status == "error":
+                f.result()  # the scene's own error (a bad file: one line), at once
+        return [f.result() for f in futures]
+
+
 def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         field_grid: int = 64, overrides: dict | None = None, workers: int | None = None,
         readme: Path | None = None, preset: str = "paper") -> dict:
@@ -98,10 +115,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     items += [("random", r, dict(overrides or {})) for r in randoms]
     _log(f"reproduce: {len(manual)} manual + {n_random} random scenes ({preset} preset), modes "
           f"{', '.join(MODES)}")
-    with precompute_pool(workers) as pool:
-        results = list(tqdm(pool.map(precompute_scene, items), total=len(items),
-                            desc="precompute", unit="scene", file=sys.stderr,
-                            disable=None))
+    results = _precompute(items, workers)
     t_pre = time.perf_counter()
     _log("evaluating all rollouts (compiles on first use)...")
     ev = evaluate_results(results, MODES, max_tasks=max(len(r.spaces) for r in results))
@@ -116,7 +130,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         is_manual = i < len(manual)
         cat = ("uncluttered" if r.C_init == 0 else "cluttered") if is_manual else randoms[
             i - len(manual)][1]
-        entry = {"name": r.scene.name, "set": "manual" if is_manual else "random",
+        entry: dict[str, Any] = {"name": r.scene.name, "set": "manual" if is_manual else "random",
                  "category": cat, "n_tasks": len(r.spaces), "C_init": r.C_init,
                  "C_final": r.C_final, "d": r.d, "h": r.h,
                  "C_optimized": _optimized_clutteredness(r, np.asarray(found.q[i])),

@@ -1,7 +1,7 @@
 """The sweep runner (reference/outputs): a streaming pipeline on Dask distributed.
 
 The chunk plan (``plan``) comes from the config alone. For every chunk not yet
-written, the client submits its precompute tasks (``workers.precompute_batch``, on
+written, the client submits its precompute tasks (``geometry_precompute.batch.precompute_batch``, on
 the CPU workers, each scene built and precomputed where it runs, cached per host)
 an evaluation task that depends on them (``evaluation_worker.evaluate_chunk``, on an
 evaluation worker) and a task that makes its tables (``evaluation_worker.encode_chunk``,
@@ -253,13 +253,11 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
         return summary
     files = cfg.scenes() if cfg.source["kind"] == "files" else None
     from .cluster import ClusterLost, connect, lost_scheduler, watch_workers
-    from .evaluation_worker import warm_up_env
 
     # When each phase ended, in seconds since the start (the client's wall clock).
     phases = {"config": time.perf_counter() - t0}
     # A local cluster's evaluation workers start the warm-up with their processes.
-    with connect(scheduler, workers, warm_up=warm_up_env(*_warm_up_job(cfg, todo, files))) \
-            as pool:
+    with connect(scheduler, workers, warm_up=warm_up_job(cfg, todo, files)) as pool:
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
@@ -290,7 +288,7 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
     return summary
 
 
-def _warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
+def warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
     """(job, scene) of ``evaluation_worker.warm_up``: the first chunk's job and its first
     scene (a Scene, or ``random_scene``'s arguments)."""
     from .evaluation_worker import ChunkJob
@@ -307,9 +305,10 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     evaluation comes back. Returns the counts and busy times for the summary."""
     from distributed import as_completed
 
+    from geometry_precompute.batch import precompute_batch
+
     from . import evaluation_worker
     from .evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk, join_chunk
-    from .workers import precompute_batch
 
     client = pool.client
     run = uuid.uuid4().hex[:8]  # task keys of this run, apart from any earlier run's
@@ -377,7 +376,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
         """Each evaluation worker compiles (or loads) the first chunk's program while the
         scenes are being precomputed (a local cluster's workers began it with their
         processes: the task then waits for that warm-up to end)."""
-        job, ref = _warm_up_job(cfg, todo, files)
+        job, ref = warm_up_job(cfg, todo, files)
         # One per evaluation worker: each takes one, holding its single evaluate slot.
         # (Not pinned with workers=[...]: distributed 2026.8's scheduler fails with a
         # KeyError when a pinned task with resources is moved off a dead worker.)

@@ -114,7 +114,7 @@ def part_path(out: Path, table: str, index: int) -> Path:
 # workers each encode about one chunk (benchmarks/RESULTS.md).
 
 
-def _numbers(values: np.ndarray, valid: np.ndarray | None = None) -> pa.Array:
+def numbers_array(values: np.ndarray, valid: np.ndarray | None = None) -> pa.Array:
     """A 1-d NumPy array of integers or floats as an Arrow array; ``valid``: False where
     the value is null."""
     a = np.ascontiguousarray(values)
@@ -130,7 +130,7 @@ def _numbers(values: np.ndarray, valid: np.ndarray | None = None) -> pa.Array:
                                  [bitmap, pa.py_buffer(a)], null_count=int((~valid).sum()))
 
 
-def _strings(values) -> pa.Array:
+def strings_array(values) -> pa.Array:
     """Python strings (None: null) as an Arrow string array."""
     values = list(values)
     data = [b"" if v is None else str(v).encode() for v in values]
@@ -144,8 +144,8 @@ def _strings(values) -> pa.Array:
 
 
 def _dictionary(codes: np.ndarray, names) -> pa.DictionaryArray:
-    return pa.DictionaryArray.from_arrays(_numbers(codes.astype(np.int8, copy=False)),
-                                          _strings(names))
+    return pa.DictionaryArray.from_arrays(numbers_array(codes.astype(np.int8, copy=False)),
+                                          strings_array(names))
 
 
 def _lists(rows: list, kind: str) -> pa.Array:
@@ -156,12 +156,12 @@ def _lists(rows: list, kind: str) -> pa.Array:
     np.cumsum(lengths, out=offsets[1:])
     flat = [v for r in rows if r is not None for v in r]
     if kind == "string":
-        values = _strings(flat)
+        values = strings_array(flat)
     else:
-        values = _numbers(np.array(flat, np.int64 if kind == "int" else np.float64))
+        values = numbers_array(np.array(flat, np.int64 if kind == "int" else np.float64))
     nulls = np.array([r is None for r in rows], bool)
-    return pa.ListArray.from_arrays(_numbers(offsets), values,
-                                    mask=_numbers(nulls.view(np.uint8)).cast(pa.bool_())
+    return pa.ListArray.from_arrays(numbers_array(offsets), values,
+                                    mask=numbers_array(nulls.view(np.uint8)).cast(pa.bool_())
                                     if nulls.any() else None)
 
 
@@ -169,14 +169,14 @@ def _setting_column(spec_kind: str, values: list) -> pa.Array:
     """A ``set.NAME`` column of the setting's own type (null: the default)."""
     if spec_kind == "float":
         v = np.array([np.nan if x is None else float(x) for x in values])
-        return _numbers(v, valid=np.array([x is not None for x in values]))
+        return numbers_array(v, valid=np.array([x is not None for x in values]))
     if spec_kind == "int":
         v = np.array([0 if x is None else int(x) for x in values], np.int64)
-        return _numbers(v, valid=np.array([x is not None for x in values]))
+        return numbers_array(v, valid=np.array([x is not None for x in values]))
     if spec_kind in ("int_pair", "float_pair"):
         return _lists([None if x is None else list(x) for x in values],
                       "int" if spec_kind == "int_pair" else "float")
-    return _strings([None if x is None else str(x) for x in values])
+    return strings_array([None if x is None else str(x) for x in values])
 
 
 def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indices,
@@ -187,20 +187,20 @@ def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indi
     from geometry_precompute.settings import SPECS
 
     S = len(scene_indices)
-    cols = {"point": _numbers(np.full(S, point_index, np.int64))}
+    cols = {"point": numbers_array(np.full(S, point_index, np.int64))}
     for k in setting_names:
         cols[f"set.{k}"] = _setting_column(SPECS[k].kind, [point.get(k)] * S)
-    cols["scene_index"] = _numbers(np.asarray(scene_indices, np.int64))
-    cols["scene"] = _strings(labels["name"])
-    cols["n_tasks"] = _numbers(np.asarray(labels["n_tasks"], np.int64))
+    cols["scene_index"] = numbers_array(np.asarray(scene_indices, np.int64))
+    cols["scene"] = strings_array(labels["name"])
+    cols["n_tasks"] = numbers_array(np.asarray(labels["n_tasks"], np.int64))
     for name in ("C_init", "C_final", "d", "h"):
-        cols[name] = _numbers(np.asarray(labels[name], np.float64))
+        cols[name] = numbers_array(np.asarray(labels[name], np.float64))
     for m, mode in enumerate(modes):
-        cols[f"{mode}.success"] = _numbers(np.asarray(metrics.u_scene[:S, m], np.float64))
+        cols[f"{mode}.success"] = numbers_array(np.asarray(metrics.u_scene[:S, m], np.float64))
         dr = np.asarray(metrics.delta_R_mean[:S, m], np.float64)
-        cols[f"{mode}.delta_R_mean"] = _numbers(dr, valid=np.isfinite(dr))
+        cols[f"{mode}.delta_R_mean"] = numbers_array(dr, valid=np.isfinite(dr))
         for o, outcome in enumerate(OUTCOMES):
-            cols[f"{mode}.n_{outcome}"] = _numbers(
+            cols[f"{mode}.n_{outcome}"] = numbers_array(
                 np.asarray(metrics.outcome_counts[:S, m, o], np.int64))
     return pa.table(cols)
 
@@ -226,11 +226,11 @@ def tasks_table(point_index: int, modes, scene_indices, labels: dict, params: di
         return _lists([a[s, t, :len(n)].tolist() for (s, t), n in zip(pairs, names,
                                                                      strict=True)], "float")
 
-    cols = {"point": _numbers(np.full(len(pairs), point_index, np.int32)),
-            "scene_index": _numbers(np.asarray(scene_indices, np.int32)[si]),
-            "task": _numbers(ti.astype(np.int16))}
+    cols = {"point": numbers_array(np.full(len(pairs), point_index, np.int32)),
+            "scene_index": numbers_array(np.asarray(scene_indices, np.int32)[si]),
+            "task": numbers_array(ti.astype(np.int16))}
     for key in ("task_ids", "object_ids", "object_kinds", "templates"):
-        cols[key.removesuffix("s") if key != "object_kinds" else "object_kind"] = _strings(
+        cols[key.removesuffix("s") if key != "object_kinds" else "object_kind"] = strings_array(
             labels[key][s][t] for s, t in pairs)
     cols["param_names"] = _lists([list(n) for n in names], "string")
     for key in ("q_min", "q_init", "q_shrunk", "q_optimized"):
@@ -240,9 +240,9 @@ def tasks_table(point_index: int, modes, scene_indices, labels: dict, params: di
         per = out[si, m, :, ti]  # (rows, N)
         counts = np.stack([np.sum(per == c, axis=1) for c in range(len(OUTCOMES))], 1)
         n = counts.sum(axis=1)
-        cols[f"{mode}.success"] = _numbers(counts[:, 0] / np.maximum(n, 1))
+        cols[f"{mode}.success"] = numbers_array(counts[:, 0] / np.maximum(n, 1))
         for o, name in enumerate(OUTCOMES):
-            cols[f"{mode}.n_{name}"] = _numbers(counts[:, o].astype(np.int64))
+            cols[f"{mode}.n_{name}"] = numbers_array(counts[:, o].astype(np.int64))
     return pa.table(cols)
 
 
@@ -252,11 +252,11 @@ def starts_table(point_index: int, scene_indices, starts: np.ndarray) -> pa.Tabl
     S = len(scene_indices)
     a = np.asarray(starts, np.float64)[:S]
     N = a.shape[1]
-    cols = {"point": _numbers(np.full(S * N, point_index, np.int32)),
-            "scene_index": _numbers(np.repeat(np.asarray(scene_indices, np.int32), N)),
-            "start": _numbers(np.tile(np.arange(N, dtype=np.int32), S))}
+    cols = {"point": numbers_array(np.full(S * N, point_index, np.int32)),
+            "scene_index": numbers_array(np.repeat(np.asarray(scene_indices, np.int32), N)),
+            "start": numbers_array(np.tile(np.arange(N, dtype=np.int32), S))}
     for k, name in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz")):
-        cols[name] = _numbers(np.ascontiguousarray(a[:, :, k].reshape(-1)))
+        cols[name] = numbers_array(np.ascontiguousarray(a[:, :, k].reshape(-1)))
     return pa.table(cols)
 
 
@@ -277,15 +277,15 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
         return np.broadcast_to(along, shape).reshape(-1)[keep]
 
     return pa.table({
-        "point": _numbers(np.full(int(keep.sum()), point_index, np.int32)),
-        "scene_index": _numbers(index(0, scene_indices, np.int32)),
+        "point": numbers_array(np.full(int(keep.sum()), point_index, np.int32)),
+        "scene_index": numbers_array(index(0, scene_indices, np.int32)),
         "mode": _dictionary(index(1, np.arange(shape[1]), np.int8), modes),
-        "start": _numbers(index(2, np.arange(shape[2]), np.int32)),
-        "task": _numbers(index(3, np.arange(shape[3]), np.int16)),
+        "start": numbers_array(index(2, np.arange(shape[2]), np.int32)),
+        "task": numbers_array(index(3, np.arange(shape[3]), np.int16)),
         "outcome": _dictionary(flat(outcome, np.int8), OUTCOMES),
-        "activated": _numbers(flat(rollouts.activated, np.int16)),
-        "steps": _numbers(flat(rollouts.step, np.int32)),
-        "delta_R": _numbers(dr := flat(rollouts.delta_R, np.float32), valid=np.isfinite(dr)),
+        "activated": numbers_array(flat(rollouts.activated, np.int16)),
+        "steps": numbers_array(flat(rollouts.step, np.int32)),
+        "delta_R": numbers_array(dr := flat(rollouts.delta_R, np.float32), valid=np.isfinite(dr)),
     })
 
 

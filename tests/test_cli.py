@@ -8,7 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from conftest import write_scene
 
 from geometry_precompute import load_scene, shipped_scene_paths
@@ -235,7 +234,10 @@ def test_cli_module_imports_nothing_heavy():
     CPU half only the light modules: geometry_precompute loads its names lazily)."""
     heavy = ("numpy", "dask", "distributed", "jax", "pyarrow", "geometry_precompute.scene",
              "geometry_precompute.settings", "geometry_precompute.bake")
+    # The parser too: a sweep's fork server starts once its arguments are parsed, before
+    # this process imports NumPy and dask (sweeps.cli._run).
     code = (f"import sys, sweeps.cli, sweeps.cluster, sweeps.interrupt, sweeps.faults; "
+            f"sweeps.cli.build_parser().parse_args(['sweep', 'c.toml', '--out', 'o']); "
             f"print([m for m in {heavy!r} if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -248,29 +250,3 @@ def test_precompute_command_does_not_import_jax(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "False"
-
-
-def _argvs() -> list[list[str]]:
-    """Sweep command lines with --dry-run and --scheduler spelled in every way argparse
-    accepts (whole, abbreviated, with '='), and some that are neither."""
-    base = ["sweep", "c.toml", "--out", "o"]
-    out = [base, [*base, "--quiet"], [*base, "--workers", "2"], ["settings"],
-           ["evaluate", "s.toml"], [*base, "--cache", "c"]]
-    for k in range(3, len("--dry-run") + 1):
-        out.append([*base, "--dry-run"[:k]])
-    for k in range(3, len("--scheduler") + 1):
-        out.append([*base, "--scheduler"[:k], "tcp://127.0.0.1:8786"])
-        out.append([*base, "--scheduler"[:k] + "=tcp://127.0.0.1:8786"])
-    return out
-
-
-@pytest.mark.parametrize("argv", _argvs(), ids=" ".join)
-def test_local_sweep_read_before_the_parser_agrees_with_it(argv):
-    """main starts the local cluster's fork server only for a sweep that will run on a
-    local cluster; its early reading of the command line (no NumPy yet) must agree with
-    argparse's, abbreviations included."""
-    from sweeps.cli import _local_sweep, build_parser
-
-    args = build_parser().parse_args(argv)
-    local = args.command == "sweep" and not args.dry_run and args.scheduler is None
-    assert _local_sweep(argv) == local

@@ -55,24 +55,29 @@ def test_gripper_capsules_match_the_reference_layout():
         np.testing.assert_allclose(sizes, ref.model.geom_size[ref.capsules, :2], atol=1e-7)
 
 
-def test_elementwise_capsule_axes_are_the_gripper_geoms():
-    """The fused pair check's capsule axes (``_capsule_axes_xyz``) are the segments of
-    ``gripper_geoms``' capsules (centre -/+ half length along the local z), with their
-    radii, on random poses and gripper sizes."""
+def test_capsule_axes_are_mujocos_capsules():
+    """The capsules' definition (``capsule_axes``, elementwise, as the fused pair check
+    uses it) against the reference's MuJoCo capsules: each axis runs between the geom's
+    centre -/+ half its length along its local z (either way round), with its radius,
+    on random poses."""
+    baked = bake([designed(0.3)])
+    ref = Collider(baked, 0)
+    dims = Params.from_bake(baked).gripper()[0]
     rng = np.random.default_rng(5)
-    n = 50
-    p = jnp.asarray(rng.normal(size=(n, 3)) * 0.1, jnp.float32)
-    q = jnp.asarray(np.roll(Rotation.random(n, random_state=rng).as_quat(), 1, axis=1),
-                    jnp.float32)
-    dims = jnp.asarray(np.column_stack([rng.uniform(0.05, 0.12, n), rng.uniform(0.005, 0.02, n),
-                                        rng.uniform(0.04, 0.12, n), rng.uniform(0.005, 0.02, n)]),
-                       jnp.float32)
-    centres, mats, sizes = jax.vmap(col.gripper_geoms)(p, q, dims)
-    half = mats[..., 2] * sizes[..., 1:2]  # (n, 3 capsules, 3)
-    for c, (start, extent, radius) in enumerate(col._capsule_axes_xyz(p, q, dims)):
-        np.testing.assert_allclose(np.stack(start, -1), centres[:, c] - half[:, c], atol=1e-6)
-        np.testing.assert_allclose(np.stack(extent, -1), 2 * half[:, c], atol=1e-6)
-        np.testing.assert_allclose(radius, sizes[:, c, 0])
+    for _ in range(20):
+        p, r = rng.normal(size=3) * 0.1, Rotation.random(random_state=rng)
+        q = jnp.asarray(np.roll(r.as_quat(), 1), jnp.float32)
+        ref.deepest(p, r)  # poses the reference capsules
+        for c, (start, extent, radius) in enumerate(
+                col.capsule_axes(jnp.asarray(p, jnp.float32), q, dims)):
+            g = ref.capsules[c]
+            half = ref.data.geom_xmat[g].reshape(3, 3)[:, 2] * ref.model.geom_size[g, 1]
+            lo, hi = ref.data.geom_xpos[g] - half, ref.data.geom_xpos[g] + half
+            a, b = np.array(start, float), np.array(start, float) + np.array(extent, float)
+            gap = min(max(np.abs(a - lo).max(), np.abs(b - hi).max()),
+                      max(np.abs(a - hi).max(), np.abs(b - lo).max()))
+            assert gap < 1e-6, (c, a, b, lo, hi)
+            np.testing.assert_allclose(float(radius), ref.model.geom_size[g, 0], rtol=1e-6)
 
 
 def test_penetrations_agree_with_cpu_mujoco():
@@ -212,7 +217,8 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     heavy = "('jax', 'coal', 'trimesh', 'manifold3d')"
     # The sweep's client (runner, cluster, command line) loads no JAX either: only its
     # evaluation workers do.
-    code = ("import sys\nimport sweeps.workers, sweeps.runner, sweeps.cluster, sweeps.cli\n"
+    code = ("import sys\n"
+            "import geometry_precompute.batch, sweeps.runner, sweeps.cluster, sweeps.cli\n"
             "from geometry_precompute import load_scene\n"
             f"load_scene({str(shipped_scene_paths()[0])!r})\n"
             f"loaded = [m for m in {heavy} if m in sys.modules]\n"
@@ -259,7 +265,7 @@ def test_swept_capsule_interval_is_exact(seed, parallel):
     c0, e1 = rng.uniform(-0.2, 0.2, 3), rng.normal(size=3) * 0.1
     e2 = -0.7 * e1 if parallel else rng.normal(size=3) * 0.1
     rho = rng.uniform(0.01, 0.1)
-    lo, hi = (float(v) for v in jax.jit(col._line_rounded_parallelogram)(
+    lo, hi = (float(v) for v in jax.jit(col.line_rounded_parallelogram)(
         *(jnp.asarray(a, jnp.float64 if jax.config.x64_enabled else jnp.float32)
           for a in (u, c0, e1, e2, rho))))
     ts = np.linspace(-0.6, 0.6, 2401)

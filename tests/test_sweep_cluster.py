@@ -149,50 +149,62 @@ print(json.dumps({"peak": tracemalloc.get_traced_memory()[1], "written": size}))
     assert grown < 0.25 * extra, (peaks, grown, extra)
 
 
-def test_warm_up_begun_with_the_process_serves_the_task(tmp_path):
-    """What an evaluation worker of a local cluster does: the warm-up passed in its
-    environment starts in a thread, and the warm-up task of the same job waits for it
-    and reports it (``early``). A task of another job runs its own; an early warm-up
-    that failed is run again by the task, which raises the error."""
+def test_an_early_warm_up_serves_the_task_of_its_job_only(tmp_path):
+    """A warm-up begun early (in a thread, as a local evaluation worker begins one with
+    its process) serves the warm-up task of the same job; a task of another job runs its
+    own; an early warm-up that failed is run again by the task, which raises the
+    error."""
     from dataclasses import replace
 
-    from sweeps.runner import _warm_up_job
+    from sweeps.evaluation_worker import EarlyWarmUp, warm_up
+    from sweeps.runner import warm_up_job
 
     cfg = load_config(write(tmp_path, CONFIG))
-    job, ref = _warm_up_job(cfg, plan(cfg), None)
-    blob = evaluation_worker.warm_up_env(job, ref)[evaluation_worker.WARM_UP_ENV]
-    evaluation_worker.start_early_warm_up(blob)
-    got = evaluation_worker.warm_up(job, ref)
+    job, ref = warm_up_job(cfg, plan(cfg), None)
+    got = warm_up(job, ref, early=EarlyWarmUp(job, ref).start())
     assert got["early"] is True and got["seconds"] > 0
     assert got["compiled"] + got["loaded"] >= 1
-    evaluation_worker.start_early_warm_up(blob)
-    other = evaluation_worker.warm_up(replace(job, modes=("baseline",)), ref)
+    other = warm_up(replace(job, modes=("baseline",)), ref, early=EarlyWarmUp(job, ref).start())
     assert other["early"] is False
     bad = (ref[0], "bogus", *ref[2:])  # random_scene refuses this sampling kind
-    evaluation_worker.start_early_warm_up(evaluation_worker.warm_up_env(job, bad)[
-        evaluation_worker.WARM_UP_ENV])
     with pytest.raises(ValueError, match="sampling kind"):
-        evaluation_worker.warm_up(job, bad)
-    assert evaluation_worker.warm_up_env(job, ref, limit=16) == {}  # too large: none
+        warm_up(job, bad, early=EarlyWarmUp(job, bad).start())
+    assert warm_up(job, ref)["early"] is False  # outside a worker: no early warm-up
 
 
-def test_local_workers_are_forked_from_one_server():
+def test_local_workers_are_forked_from_one_server_and_set_up_by_the_plugin(tmp_path):
     """The local cluster's workers are forked from one fork server, which imported the
-    task modules before any task ran; none of them has JAX before its first task (the
-    evaluation worker's warm-up brings it), and the server is not this process."""
+    task modules before any task ran; none of them has JAX before its first task, and
+    the server is not this process. Each is set up by the plugin: SIGINT ignored, the
+    precompute worker at nice 5, and the evaluation worker's warm-up, passed to the
+    cluster, begun with its process and taken by the warm-up task of its job (JAX comes
+    with it)."""
+    import signal
+
     from sweeps.cluster import connect
+    from sweeps.runner import warm_up_job
 
     def probe():
-        return os.getppid(), "sweeps.workers" in sys.modules, "jax" in sys.modules
+        return (os.getppid(), "geometry_precompute.batch" in sys.modules,
+                signal.getsignal(signal.SIGINT) == signal.SIG_IGN, os.nice(0))
 
-    with connect(workers=1) as pool:
+    cfg = load_config(write(tmp_path, CONFIG))
+    job, ref = warm_up_job(cfg, plan(cfg), None)
+    with connect(workers=1, warm_up=(job, ref)) as pool:
         found = pool.client.run(probe)
-    parents = {p for p, _, _ in found.values()}
+        without_jax = pool.client.run(lambda: "jax" not in sys.modules,
+                                      workers=[*set(found) - set(pool.evaluators)])
+        warmed = pool.client.submit(evaluation_worker.warm_up, job, ref,
+                                    resources=pool.evaluate, pure=False).result()
+    parents = {p for p, *_ in found.values()}
     assert len(found) == 2 and len(parents) == 1 and os.getpid() not in parents
     server = open(f"/proc/{parents.pop()}/cmdline", "rb").read()
     assert b"multiprocessing.forkserver" in server
-    assert all(imported for _, imported, _ in found.values())
-    assert not any(jax for _, _, jax in found.values())
+    assert all(imported and ignored for _, imported, ignored, _ in found.values())
+    nice = {w in pool.evaluators: n for w, (*_, n) in found.items()}
+    assert nice[False] == os.nice(0) + 5 and nice[True] == os.nice(0)
+    assert list(without_jax.values()) == [True]
+    assert warmed["early"] is True and warmed["compiled"] + warmed["loaded"] >= 1
 
 
 def test_local_dashboard_is_built_when_first_opened():
@@ -239,8 +251,8 @@ def test_a_chunk_evaluates_the_same_however_its_precompute_was_split(tmp_path):
     """``join_chunk`` (a CPU worker's task in a sweep) joins a chunk's precompute batches
     in the chunk's order, padded to the chunk's shape; its evaluation, trimmed back to
     the chunk's scenes, does not depend on how the scenes were split into batches."""
+    from geometry_precompute.batch import precompute_batch
     from sweeps.evaluation_worker import ChunkJob, evaluate_chunk, join_chunk
-    from sweeps.workers import precompute_batch
 
     cfg = parse_config({"name": "j", "chunk": 9, "source": {
         "kind": "random", "count": 9, "tasks": [3, 4], "seed": 1}}, "<test>", str(tmp_path))

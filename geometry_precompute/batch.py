@@ -1,63 +1,26 @@
-"""The precompute's worker processes (CPU only, no JAX), and the functions they run.
+"""Precompute, then bake: a batch of scenes made ready for the JAX half, once per
+sweep point (CPU only, no JAX).
 
-The task functions live here, in a module that imports nothing from JAX: a spawned
-worker imports the module of the function it is sent, so a task defined beside the
-evaluation would load JAX into every worker (a test holds this).
-
-Started with spawn (forking a process in which JAX runs threads can deadlock). They
-ignore SIGINT: Ctrl-C reaches the whole process group, and the command, not each
-worker, decides what an interruption means (one line, exit 130, the pool shut down).
-And they die with the command: on Linux each asks the kernel for SIGKILL when its
-parent ends (``PR_SET_PDEATHSIG``), so a command killed with SIGKILL leaves no worker
-behind (before, they waited on their task queue for ever, about 400 MB each).
+The local cluster's precompute workers run these functions as tasks
+(``sweeps.cluster``): :func:`precompute_batch` for ``shacc sweep``,
+:func:`precompute_scene` for ``shacc reproduce``. A worker imports the module of the
+task it is sent, so this module imports nothing from JAX (a test holds this).
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import json
-import multiprocessing
-import os
-import signal
-import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from geometry_precompute import DEFAULTS, bake, load_scene, precompute, random_scene
-from geometry_precompute.cache import cached, default_folder
-from geometry_precompute.precompute import PrecomputeResult
-from geometry_precompute.scene import Scene
-
-_PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-
-def _worker_setup(parent: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-        if os.getppid() != parent:  # the parent ended before the request was made
-            os._exit(1)
-
-
-@contextlib.contextmanager
-def precompute_pool(workers: int | None):
-    """A process pool that, on any exception (Ctrl-C included), drops its queued tasks
-    and waits only for the running ones, so no worker outlives the command."""
-    from .interrupt import start_resource_tracker
-
-    start_resource_tracker()  # the workers are spawned with SIGINT blocked (interrupt.py)
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_setup, initargs=(os.getpid(),))
-    try:
-        yield pool
-    except BaseException:
-        pool.shutdown(wait=True, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
+from .bake import bake
+from .cache import cached, default_folder
+from .generate import random_scene
+from .loading import load_scene
+from .precompute import PrecomputeResult, precompute
+from .scene import Scene
+from .settings import DEFAULTS
 
 
 @dataclass(frozen=True)

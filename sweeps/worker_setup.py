@@ -1,0 +1,87 @@
+"""What a shacc worker does as it starts: one Dask ``WorkerPlugin``.
+
+The local cluster (:func:`sweeps.cluster.connect`) hands every worker a
+:class:`WorkerSetup` when it creates it; distributed runs its ``setup`` in the new
+worker process, before the worker joins the scheduler. It does three things:
+
+- SIGINT is ignored: Ctrl-C reaches the whole process group, and the command, not each
+  worker, decides what it means (the cluster is closed, ``interrupted``);
+- a precompute worker runs at nice 5: with one per core, the precompute would otherwise
+  take CPU time from the evaluation worker's compilation and from the host loop that
+  drives the accelerator, which every chunk waits on;
+- an evaluation worker given a warm-up (the first chunk's job and one of its scenes)
+  begins it at once, in a thread (:class:`sweeps.evaluation_worker.EarlyWarmUp`): JAX's
+  start, the accelerator's and the program's load or compilation then overlap the
+  start of the other workers. The sweep's warm-up task takes it (:func:`early_warm_up`).
+
+The worker's environment (its GPU, ``JAX_PLATFORMS``, the allocator) is not set here
+but by its nanny, before the process starts: the nanny also refreshes dask's config
+from it, which a plugin running inside the worker comes too late for.
+
+A worker started apart (``dask worker ... --preload sweeps.worker_setup``) gets the
+same setup, without a warm-up (:func:`dask_setup`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+from typing import TYPE_CHECKING, Any
+
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from .cluster import EVALUATE, PRECOMPUTE
+
+if TYPE_CHECKING:
+    from .evaluation_worker import ChunkJob, EarlyWarmUp
+
+
+class WorkerSetup(WorkerPlugin):
+    """The setup of one shacc worker (module docstring). ``warm_up``: ``(job, scene)``
+    of :func:`sweeps.evaluation_worker.warm_up`, begun as an evaluation worker starts;
+    None: no early warm-up.
+
+    >>> WorkerSetup().name
+    'shacc-setup'
+    """
+
+    name = "shacc-setup"
+
+    def __init__(self, warm_up: tuple[ChunkJob, Any] | None = None) -> None:
+        self.warm_up = warm_up
+        self.early: EarlyWarmUp | None = None
+
+    def setup(self, worker) -> None:
+        with contextlib.suppress(ValueError):  # not the main thread: nothing to do
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        resources = worker.state.total_resources or {}
+        if PRECOMPUTE in resources:
+            with contextlib.suppress(OSError):
+                os.nice(5)
+        elif EVALUATE in resources and self.warm_up is not None:
+            from .evaluation_worker import EarlyWarmUp
+
+            self.early = EarlyWarmUp(*self.warm_up).start()
+
+
+def early_warm_up() -> EarlyWarmUp | None:
+    """The warm-up this worker began as it started, handed out once; None outside a
+    worker, on a worker without one, or once taken."""
+    from distributed import get_worker
+
+    try:
+        worker = get_worker()
+    except ValueError:  # not in a worker's task
+        return None
+    plugin = worker.plugins.get(WorkerSetup.name)
+    if not isinstance(plugin, WorkerSetup):
+        return None
+    early, plugin.early = plugin.early, None
+    return early
+
+
+def dask_setup(worker) -> None:
+    """``dask worker --preload sweeps.worker_setup``: a worker started apart gets the
+    local workers' setup (SIGINT ignored, nice 5 for ``--resources precompute=1``)."""
+    WorkerSetup().setup(worker)
