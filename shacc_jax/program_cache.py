@@ -60,7 +60,11 @@ def _source_hash() -> str:
     return _SOURCE_HASH
 
 
-def _key(name: str, static: tuple, tree, leaves: list) -> str:
+def program_key(name: str, static: tuple, tree, leaves: list) -> str:
+    """The cache key of an exported program: its name, the package's source, the JAX
+    and jaxlib versions, the backend, the flags that change a trace (x64, the stack
+    frames kept in source locations), the static arguments and the arguments' tree,
+    shapes and dtypes."""
     import jaxlib
 
     flags: Any = jax.config  # its flags are attributes that type checkers do not see
@@ -84,7 +88,7 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
     if _DIR is None:
         return jitted(*args, **static)
     leaves, in_tree = jax.tree.flatten(args)
-    key = _key(name, tuple(sorted(static.items())), in_tree, leaves)
+    key = program_key(name, tuple(sorted(static.items())), in_tree, leaves)
     run = _LOADED.get(key)
     if run is None:
         path = _DIR / f"export-{name}-{key}.bin"

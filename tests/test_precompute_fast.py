@@ -22,7 +22,6 @@ from geometry_precompute import DEFAULTS, precompute, random_scene
 from geometry_precompute.clusters import clusters_from_pairs
 from geometry_precompute.clutteredness import clutteredness, overlap_volumes
 from geometry_precompute.frames import (
-    _from_matrix,
     frame_from_approach,
     quat_from_matrix,
     quat_of_rotation,
@@ -198,7 +197,12 @@ def test_frames_equal_to_numpy_and_scipy():
     np.testing.assert_allclose(ours, numpy_way, rtol=0, atol=2 * np.finfo(np.float64).eps)
     mats = np.concatenate([np.stack([frame_from_approach(a) for a in dirs[::50]]),
                            Rotation.random(2000, rng=1).as_matrix()])
-    assert np.array_equal(_from_matrix(mats).as_quat(), Rotation.from_matrix(mats).as_quat())
+    # quat_from_matrix skips scipy's check that the matrices are rotations: the same
+    # quaternions (w first, w >= 0) as scipy's checked conversion, bit for bit.
+    xyzw = Rotation.from_matrix(mats).as_quat()
+    checked = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    checked = np.where(checked[:, :1] < 0, -checked, checked)
+    assert np.array_equal(quat_from_matrix(mats), checked)
     mats = np.concatenate([mats, Rotation.random(20_000, rng=2).as_matrix(),
                            [np.eye(3), frame_from_approach((0.0, 0.0, -1.0))]])
     for m in mats:

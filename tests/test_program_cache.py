@@ -71,7 +71,7 @@ def test_lean_locations_drop_the_stack_frames(monkeypatch):
     try:
         jax.config.update("jax_traceback_in_locations_limit", 10)
         assert here in locations()
-        framed = program_cache._key("f", (), tree, leaves)
+        framed = program_cache.program_key("f", (), tree, leaves)
         monkeypatch.setenv(compile_cache.LOCATIONS_ENV, "10")
         compile_cache.lean_locations()  # the user's setting: left alone
         assert jax.config.jax_traceback_in_locations_limit == 10
@@ -79,7 +79,7 @@ def test_lean_locations_drop_the_stack_frames(monkeypatch):
         compile_cache.lean_locations()
         assert jax.config.jax_traceback_in_locations_limit == 0
         assert here not in locations()
-        assert program_cache._key("f", (), tree, leaves) != framed
+        assert program_cache.program_key("f", (), tree, leaves) != framed
     finally:
         jax.config.update("jax_traceback_in_locations_limit", previous)
 

@@ -25,7 +25,7 @@ DTYPES = [np.int8, np.int16, np.int32, np.int64, np.uint8, np.float32, np.float6
 def test_numbers_equal_pa_array(data, dtype, nulls, n):
     values = data.draw(hnp.arrays(dtype, n))
     valid = data.draw(hnp.arrays(bool, n)) if nulls else None
-    got = tables._numbers(values, valid)
+    got = tables.numbers_array(values, valid)
     want = pa.array(values, mask=None if valid is None else ~valid)
     got.validate(full=True)
     assert got.type == want.type and got.null_count == want.null_count
@@ -39,7 +39,7 @@ def test_numbers_equal_pa_array(data, dtype, nulls, n):
 
 @given(st.lists(st.one_of(st.none(), st.text()), max_size=40))
 def test_strings_equal_pa_array(values):
-    got = tables._strings(values)
+    got = tables.strings_array(values)
     got.validate(full=True)
     assert got.equals(pa.array(values, pa.string()))
 
@@ -48,7 +48,7 @@ def test_numbers_refuse_what_they_cannot_copy():
     for bad in (np.zeros((2, 2)), np.array([True]), np.array([1], ">i4"),
                 np.array(["a"])):
         with pytest.raises(TypeError, match="1-d array"):
-            tables._numbers(bad)
+            tables.numbers_array(bad)
 
 
 def test_a_chunks_tables_import_no_pandas():
