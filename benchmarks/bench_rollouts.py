@@ -142,7 +142,7 @@ def cmd_run(args) -> None:
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts,
                "block": layout.lanes_per_block or schema.lanes_per_block_default(
-                   jax.default_backend()),
+                   jax.default_backend(), layout.collision_checks),
                "chunk": layout.samples_per_block, "collision": args.collision,
                "meta": layout.meta_formula,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),

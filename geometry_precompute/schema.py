@@ -131,10 +131,22 @@ def per_task(fields) -> frozenset[str]:
     return frozenset(f.name for f in fields if f.shape[1:2] == ("T",))
 
 
-def lanes_per_block_default(backend: str) -> int:
+def lanes_per_block_default(backend: str, collision_checks: bool = False) -> int:
     """Lanes per block of the lane scheduler: large on accelerators (each block is one
-    sequence of kernel launches), small on CPU (less spread within a block)."""
-    return 1 << 17 if backend in ("gpu", "cuda", "rocm", "tpu") else 1 << 8
+    sequence of kernel launches), small on CPU (less spread within a block). With
+    collision checks a block holds lanes x samples x capsules x objects pairs, and an
+    accelerator's takes half as many lanes (measured on an H100, a quarter, half and
+    all of them: 0.63, 0.59, 0.72 s for 10 000 scenes; benchmarks/RESULTS.md); a CPU's
+    keeps all of them (fewer, fuller rounds of the exact search).
+
+    >>> lanes_per_block_default("gpu"), lanes_per_block_default("gpu", True)
+    (131072, 65536)
+    >>> lanes_per_block_default("cpu", True)
+    256
+    """
+    if backend in ("gpu", "cuda", "rocm", "tpu"):
+        return 1 << 16 if collision_checks else 1 << 17
+    return 1 << 8
 
 
 @dataclass(frozen=True)
@@ -148,8 +160,9 @@ class Layout:
     ``collision_checks``: whether the program checks gripper collisions (some scene's
     ``collision`` param is on; scenes with it off are not checked). ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
-    backend's default, :func:`lanes_per_block_default`) and ``samples_per_block``: the
-    lane scheduler's block of lanes x samples (``shacc_jax.lanes``).
+    backend's default for the program, :func:`lanes_per_block_default`, which the run
+    plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
+    samples (``shacc_jax.lanes``).
     """
 
     n_tasks: int

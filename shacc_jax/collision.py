@@ -332,6 +332,56 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
     return jnp.where(jnp.any(hit, axis=1), jnp.argmax(hit, axis=1), first_sure)
 
 
+class LaneObjects(NamedTuple):
+    """What the lane pass's collision step reads (:func:`lane_objects`): every scene's
+    objects (:func:`scene_objects`, leading axis S), the gripper's sizes (S, 4), each
+    lane's touchable objects first, in object order and padded to whole groups of
+    ``per_group`` (L, G per_group), and how many each lane can touch (L,)."""
+
+    objects: tuple
+    gripper: Float[Array, "S 4"]
+    order: Int[Array, "L GJ"]
+    n_touch: Int[Array, " L"]
+    per_group: int
+
+    @property
+    def groups(self) -> int:
+        """G: how many groups of ``per_group`` objects a lane's objects form."""
+        return self.order.shape[1] // self.per_group
+
+
+def lane_objects(geometry, params, touch: Bool[Array, "L O"]) -> LaneObjects:
+    """:class:`LaneObjects` of a batch whose lanes can touch the objects ``touch``
+    (each lane's collision window, :func:`path_window`). Most lanes can touch at most
+    OBJECT_SLOTS objects and are checked once; a lane that can touch more is checked
+    once per group of them, and the group that collides first decides."""
+    L, O = touch.shape
+    J = min(O, OBJECT_SLOTS)
+    G = -(-O // J)
+    objects = jax.vmap(lambda g: scene_objects(
+        g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
+    order = jnp.argsort(~touch, axis=1, stable=True)
+    order = jnp.concatenate([order, jnp.zeros((L, G * J - O), order.dtype)], axis=1)
+    return LaneObjects(objects, params.gripper(), order, jnp.sum(touch, axis=1), J)
+
+
+def block_first_penetration(lane_obj: LaneObjects, scene: Int[Array, " B"],
+                            idx: Int[Array, " B"], group, p: Float[Array, "B W 3"],
+                            q: Float[Array, "B W 4"], valid: Bool[Array, "B W"]
+                            ) -> Int[Array, " B"]:
+    """:func:`first_penetration` of a block of lanes ``idx`` (their scenes ``scene``)
+    against their touchable objects of group ``group``; objects a lane cannot touch
+    in its window are left out exactly. (B,): the first sample of the block at which
+    the gripper penetrates one (W for none)."""
+    kind, centre, mat, size, mask = lane_obj.objects
+    J = lane_obj.per_group
+    take = jax.lax.dynamic_slice_in_dim(lane_obj.order[idx], group * J, J, axis=1)
+    rank = group * J + jnp.arange(J)
+    picked = [x[scene[:, None], take] for x in (kind, centre, mat, size)]
+    reachable = mask[scene[:, None], take] & (rank[None, :] < lane_obj.n_touch[idx][:, None])
+    return first_penetration((*picked, reachable), p, q, lane_obj.gripper[scene], valid)
+
+
 def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
     return deepest(objects, p, q, dims) < -PENETRATION_EPS
 

@@ -20,6 +20,7 @@ scheduler sorts the lanes of all points together, and the outputs get a leading 
 from __future__ import annotations
 
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -34,17 +35,34 @@ from . import tracking
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
 
-# With collision checks, a block of the lane scheduler takes 1/share of the lanes of one
-# without, by backend (None: accelerators). Measured on an H100 (a quarter, half, all:
-# 0.63, 0.59, 0.72 s for 10 000 scenes): benchmarks/RESULTS.md.
-COLLISION_BLOCK_SHARE = {"cpu": 1, None: 2}
+
+class Windows(NamedTuple):
+    """Per lane (L = S N T, in lane order): the samples the lane pass visits. The meta
+    window (tracking) and the collision window, each from .. to (empty when from >
+    to); the joined window's first sample and length (0: nothing to do); and which
+    objects the gripper can touch in the collision window (L, O)."""
+
+    meta_from: Array
+    meta_to: Array
+    collide_from: Array
+    collide_to: Array
+    start: Array
+    length: Array
+    touch: Array
+
+
+class LaneState(NamedTuple):
+    """What the lane pass carries per lane (L,): the orientation (L, 4), the meta
+    steps counted, and the first colliding sample (inf for none)."""
+
+    r: Array
+    meta_steps: Array
+    hit: Array
 
 
 def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
-             prep: tracking.Prepared | None, collide: bool):
-    """Per lane (L = S N T, in lane order): the meta window (tracking) and the collision
-    window, each (from, to) samples, empty when from > to; the joined window's start and
-    length; and which objects the gripper can touch in the collision window (L, O).
+             prep: tracking.Prepared | None, collide: bool) -> Windows:
+    """The lanes' :class:`Windows`.
     ``path`` and ``act_step``: (S, N, T); ``prep``: the tracking's prepared spaces, None
     without tracking. Mapped over scenes, then starts and tasks, so that a scene's
     arrays are read in place rather than gathered once per lane."""
@@ -91,131 +109,113 @@ def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
     w_to = jnp.maximum(jnp.where(m_ok, m_to, -inf), jnp.where(c_ok, c_to, -inf))
     length = jnp.where(real & (m_ok | c_ok), w_to - w_from + 1.0, 0.0)
     w_from = jnp.where(length > 0, w_from, 0.0)
-    return (m_from, m_to), (c_from, c_to), w_from, length, touch
+    return Windows(m_from, m_to, c_from, c_to, w_from, length, touch)
 
 
 def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activation,
-               layout: Layout, track: bool, lanes_per_block: int):
+               layout: Layout, track: bool) -> LaneState:
     """Orientation tracking (``track``, the shacc mode) and gripper collision checks
-    (``layout.collision_checks``) over every (scene, start, task) lane. Returns R
-    (S, N, T, 4), the meta steps (S, N, T) and the first colliding sample (S, N, T; inf
-    for none).
+    (``layout.collision_checks``) over every (scene, start, task) lane. Returns the
+    lanes' final :class:`LaneState`, each (S, N, T, ...): R, the meta steps and the
+    first colliding sample (inf for none).
 
-    Each lane's window joins its meta window with the samples at which the gripper can
-    touch an object (``collision.path_window``), up to the activation sample. Per block
-    of lanes x W samples: the meta targets in one parallel pass, a W-step scan of the
-    rotation rule that also emits R at each sample, then the collision checks of all
-    B x W poses at once against the lane's touchable objects, J at a time (a lane that
-    can touch more than J runs once per group of J; the run that collides first counts).
-    A collision at sample k ends the lane: R stays as it was at k and the rotations
-    from k on are not counted (the step rule checks collisions before it rotates).
-    With ``layout.meta_formula`` "both", the lanes of yaw-only scenes and the others
-    get a pass each, each compiled for its own target formula."""
+    Each lane's window (:class:`Windows`) joins its meta window with the samples at
+    which the gripper can touch an object (``collision.path_window``), up to the
+    activation sample. The lane scheduler (``lanes``) runs blocks of lanes x W samples;
+    per block (:func:`_block_step`): the rotation rule (``tracking.block_rotation``),
+    then the collision checks of all B x W poses at once against the lanes' touchable
+    objects (``collision.block_first_penetration``), J at a time (a lane that can touch
+    more than J runs once per group of J; the run that collides first counts). A
+    collision at sample k ends the lane: R stays as it was at k and the rotations from
+    k on are not counted (the step rule checks collisions before it rotates). With
+    ``layout.meta_formula`` "both", the lanes of yaw-only scenes and the others get a
+    pass each, each compiled for its own target formula."""
     collide = layout.collision_checks
     S, N, T = act.step.shape
     L = S * N * T
     dtype = geometry.starts.dtype
-    inf = jnp.asarray(jnp.inf, dtype)
-    W = layout.samples_per_block
-    offsets = jnp.arange(W, dtype=dtype)
     lanes = tracking.Lanes.of(path)
     prep = tracking.prepare(geometry) if track else None
-    (m_from, m_to), (c_from, c_to), w_from, length, touch = _windows(
-        geometry, params, path, act.step, prep, collide)
-    O = geometry.obj_mask.shape[1]
-    J = min(O, col.OBJECT_SLOTS)
-    if collide:
-        objects = jax.vmap(lambda g: col.scene_objects(
-            g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
-        gripper = params.gripper()
-        # Each lane's touchable objects first (in object order), J per group: most lanes
-        # can touch at most J and need one group; a lane that can touch more is run once
-        # per group of J, and the run that collides first decides.
-        G = -(-O // J)
-        count = jnp.sum(touch, axis=1)
-        order = jnp.argsort(~touch, axis=1, stable=True)
-        order = jnp.concatenate([order, jnp.zeros((L, G * J - O), order.dtype)], axis=1)
-    else:
-        G = 1
-
-    def penetrations(idx, k, r_at, valid, group):
-        """(B,): the first sample of the block at which the gripper penetrates one of
-        the lanes' objects of ``group`` (W for none)."""
-        p = jnp.moveaxis(lanes.points(idx, k), 0, -1)
-        s = lanes.scene[idx]
-        kind, centre, mat, size, mask = objects
-        take = jax.lax.dynamic_slice_in_dim(order[idx], group * J, J, axis=1)
-        rank = group * J + jnp.arange(J)
-        picked = [x[s[:, None], take] for x in (kind, centre, mat, size)]
-        # Objects that cannot be touched in the lane's window are left out exactly.
-        reachable = mask[s[:, None], take] & (rank[None, :] < count[idx][:, None])
-        return col.first_penetration((*picked, reachable), p, r_at, gripper[s], valid)
-
-    def per_block(formula, group, idx, start, valid, rows):
-        r_b, n_b, hit_b = rows
-        B = idx.shape[0]
-        k = w_from[idx][:, None] + start + offsets[None, :]
-        alive = ~jnp.isfinite(hit_b)
-        if track:
-            m_valid = valid & (k >= m_from[idx][:, None]) & (k <= m_to[idx][:, None])
-            inside, goal = tracking.block_targets(geometry, params, prep, lanes, idx, k, formula)
-            angle = (params.omega_max * params.dt)[lanes.scene[idx]]
-            turned = inside & m_valid
-            if collide:
-                r_end, r_at = jax.vmap(am.rotate_along_path)(r_b, turned, goal, angle)
-            else:
-                r_end, _ = jax.vmap(am.rotate_along)(r_b, turned, goal, angle)
-        else:
-            r_end = r_b
-            r_at = jnp.broadcast_to(r_b[:, None, :], (B, W, 4))
-            turned = jnp.zeros((B, W), bool)
-        if collide:
-            # A lane that collided in an earlier block is not checked again.
-            c_valid = (valid & alive[:, None] & (k >= c_from[idx][:, None])
-                       & (k <= c_to[idx][:, None]))
-            first = penetrations(idx, k, r_at, c_valid, group)
-            hit_now = first < W
-            first = jnp.minimum(first, W - 1)
-            upto = jnp.where(hit_now, first, W)
-            r_end = jnp.where(hit_now[:, None], r_at[jnp.arange(B), first], r_end)
-            hit_b = jnp.where(hit_now, k[jnp.arange(B), first], hit_b)
-        else:
-            upto = jnp.full(B, W)
-        counted = turned & (offsets[None, :] < upto[:, None].astype(dtype))
-        n_b = n_b + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(n_b.dtype)
-        r_b = jnp.where(alive[:, None], r_end, r_b)
-        return r_b, n_b, hit_b
-
-    state = (geometry.starts[lanes.scene, lanes.start, 3:], jnp.zeros(L, jnp.int32),
-             jnp.full(L, inf))
+    win = _windows(geometry, params, path, act.step, prep, collide)
+    lane_obj = col.lane_objects(geometry, params, win.touch) if collide else None
+    state = LaneState(geometry.starts[lanes.scene, lanes.start, 3:], jnp.zeros(L, jnp.int32),
+                      jnp.full(L, jnp.inf, dtype))
+    lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
+        jax.default_backend(), collide)
 
     def one_pass(length, formula):
-        if G == 1:
-            return lane_scheduler.run(length, lanes_per_block, W, state,
-                                      partial(per_block, formula, 0))
+        step = partial(_block_step, geometry, params, layout, lanes, prep, win, lane_obj,
+                       formula)
+        if lane_obj is None or lane_obj.groups == 1:
+            return lane_scheduler.run(length, lanes_per_block, layout.samples_per_block,
+                                      state, partial(step, 0))
 
         # One compiled pass, run per object group over the lanes that have objects in it.
         def group_pass(g):
-            busy = jnp.where((g == 0) | (count > g * J), length, 0.0)
-            return lane_scheduler.run(busy, lanes_per_block, W, state,
-                                      partial(per_block, formula, g))
+            busy = jnp.where((g == 0) | (lane_obj.n_touch > g * lane_obj.per_group), length,
+                             0.0)
+            return lane_scheduler.run(busy, lanes_per_block, layout.samples_per_block,
+                                      state, partial(step, g))
 
-        r, n, hit = jax.lax.map(group_pass, jnp.arange(G))
+        r, n, hit = jax.lax.map(group_pass, jnp.arange(lane_obj.groups))
         # The group that collides first ended the lane; without a collision all agree
         # with group 0 (argmin of all-inf is 0).
         pick = jnp.argmin(hit, axis=0)
-        return (r[pick, jnp.arange(L)], n[pick, jnp.arange(L)], hit[pick, jnp.arange(L)])
+        return LaneState(r[pick, jnp.arange(L)], n[pick, jnp.arange(L)],
+                         hit[pick, jnp.arange(L)])
 
     if not track or layout.meta_formula != "both":
-        result = one_pass(length, layout.meta_formula)
+        result = one_pass(win.length, layout.meta_formula)
     else:
         yaw_lane = geometry.yaw_meta[lanes.scene]
-        yaw_part = one_pass(jnp.where(yaw_lane, length, 0.0), "yaw")
-        general_part = one_pass(jnp.where(yaw_lane, 0.0, length), "general")
-        result = tuple(jnp.where(yaw_lane.reshape((L,) + (1,) * (a.ndim - 1)), a, b)
-                       for a, b in zip(yaw_part, general_part, strict=True))
-    r, n, hit = result
-    return r.reshape(S, N, T, 4), n.reshape(S, N, T), hit.reshape(S, N, T)
+        yaw_part = one_pass(jnp.where(yaw_lane, win.length, 0.0), "yaw")
+        general_part = one_pass(jnp.where(yaw_lane, 0.0, win.length), "general")
+        result = LaneState(*(jnp.where(yaw_lane.reshape((L,) + (1,) * (a.ndim - 1)), a, b)
+                             for a, b in zip(yaw_part, general_part, strict=True)))
+    return LaneState(*(a.reshape(S, N, T, *a.shape[1:]) for a in result))
+
+
+def _block_step(geometry: Geometry, params: Params, layout: Layout, lanes: tracking.Lanes,
+                prep: tracking.Prepared | None, win: Windows,
+                lane_obj: col.LaneObjects | None, formula: str, group, idx, start, valid,
+                rows: LaneState) -> LaneState:
+    """One block of the lane pass (``lanes.run``'s ``per_block``): the lanes ``idx``
+    at the W samples from ``start`` of their windows (``valid``: within the window),
+    with their state ``rows``; tracking where ``prep`` is given, collision checks of
+    object group ``group`` where ``lane_obj`` is."""
+    W = layout.samples_per_block
+    B = idx.shape[0]
+    offsets = jnp.arange(W, dtype=start.dtype)
+    k = win.start[idx][:, None] + start + offsets[None, :]
+    alive = ~jnp.isfinite(rows.hit)
+    if prep is not None:
+        in_meta = valid & (k >= win.meta_from[idx][:, None]) & (k <= win.meta_to[idx][:, None])
+        rot = tracking.block_rotation(geometry, params, prep, lanes, idx, k, in_meta, rows.r,
+                                      formula, per_sample=lane_obj is not None)
+    else:
+        rot = tracking.BlockRotation(rows.r, jnp.broadcast_to(rows.r[:, None, :], (B, W, 4)),
+                                     jnp.zeros((B, W), bool))
+    r_end = rot.end
+    if lane_obj is not None:
+        assert rot.at is not None
+        # A lane that collided in an earlier block is not checked again.
+        in_window = (valid & alive[:, None] & (k >= win.collide_from[idx][:, None])
+                     & (k <= win.collide_to[idx][:, None]))
+        p = jnp.moveaxis(lanes.points(idx, k), 0, -1)
+        first = col.block_first_penetration(lane_obj, lanes.scene[idx], idx, group, p,
+                                            rot.at, in_window)
+        hit_now = first < W
+        first = jnp.minimum(first, W - 1)
+        upto = jnp.where(hit_now, first, W)
+        r_end = jnp.where(hit_now[:, None], rot.at[jnp.arange(B), first], r_end)
+        hit = jnp.where(hit_now, k[jnp.arange(B), first], rows.hit)
+    else:
+        upto = jnp.full(B, W)
+        hit = rows.hit
+    counted = rot.turned & (offsets[None, :] < upto[:, None].astype(start.dtype))
+    n = rows.meta_steps + jnp.where(alive, jnp.sum(counted, axis=1), 0).astype(
+        rows.meta_steps.dtype)
+    return LaneState(jnp.where(alive[:, None], r_end, rows.r), n, hit)
 
 
 def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
@@ -293,7 +293,6 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
                                 geometry)
         params = jax.tree.map(lambda a: a.reshape(points * S), params)
     modes = layout.modes
-    lanes_per_block = layout.lanes_per_block or lanes_per_block_default(jax.default_backend())
     passes = {}
     if "baseline" in modes:
         passes["init"] = jax.vmap(partial(am.activation_pass, which="init"))(geometry, params)
@@ -308,12 +307,7 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         path, act, out = passes["init" if mode == "baseline" else "opt"]
         track = mode == "shacc"
         if track or layout.collision_checks:
-            # With collision checks a block holds (lanes x samples x capsules x objects)
-            # pairs: COLLISION_BLOCK_SHARE (half the lanes on an accelerator; on a CPU all
-            # of them: fewer, fuller rounds of the exact search).
-            share = COLLISION_BLOCK_SHARE.get(jax.default_backend(), COLLISION_BLOCK_SHARE[None])
-            block = max(1, lanes_per_block // share) if layout.collision_checks else lanes_per_block
-            r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track, block)
+            r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track)
             out = _collided(out, path, hit)
         else:
             r, meta_steps = r0, no_meta

@@ -105,3 +105,32 @@ def block_targets(geometry: Geometry, params: Params, prep: Prepared, lanes: Lan
         orient = (tasks(geometry.orient_quat, 1), tasks(geometry.orient_axis, 1))
         inside, q = meta_target_batch(*common, *orient, p, tau)
     return inside, jnp.moveaxis(q, 0, -1)
+
+
+class BlockRotation(NamedTuple):
+    """One block of the rotation rule (:func:`block_rotation`): the orientation at the
+    block's end (B, 4), at each of its samples (B, W, 4; None unless asked for), and
+    whether the meta skill turned the gripper at each sample (B, W)."""
+
+    end: Float[Array, "B 4"]
+    at: Float[Array, "B W 4"] | None
+    turned: Bool[Array, "B W"]
+
+
+def block_rotation(geometry: Geometry, params: Params, prep: Prepared, lanes: Lanes,
+                   idx: Int[Array, " B"], k: Float[Array, "B W"], in_window: Bool[Array, "B W"],
+                   r: Float[Array, "B 4"], formula: str, per_sample: bool) -> BlockRotation:
+    """The meta skill's rotation over W samples k of the lanes ``idx``, from their
+    orientations ``r``: the targets of the whole block in one pass
+    (:func:`block_targets`), then the rotation rule sample by sample wherever a sample
+    lies in the lane's meta window (``in_window``) and in a meta region. With
+    ``per_sample`` the orientation at every sample too (the collision checks pose the
+    gripper with it)."""
+    inside, goal = block_targets(geometry, params, prep, lanes, idx, k, formula)
+    angle = (params.omega_max * params.dt)[lanes.scene[idx]]
+    turned = inside & in_window
+    if per_sample:
+        end, at = jax.vmap(am.rotate_along_path)(r, turned, goal, angle)
+        return BlockRotation(end, at, turned)
+    end, _ = jax.vmap(am.rotate_along)(r, turned, goal, angle)
+    return BlockRotation(end, None, turned)
