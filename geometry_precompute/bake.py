@@ -22,6 +22,7 @@ passed to JAX.
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -62,11 +63,13 @@ class BakedScenes:
     orient_quat: np.ndarray
     orient_axis: np.ndarray
     starts: np.ndarray
+    start_index: np.ndarray
     obj_mask: np.ndarray
     obj_kind: np.ndarray
     obj_center: np.ndarray
     obj_quat: np.ndarray
     obj_size: np.ndarray
+    scene_key: np.ndarray
     dt: np.ndarray
     v_max: np.ndarray
     omega_max: np.ndarray
@@ -78,6 +81,11 @@ class BakedScenes:
     gripper_finger_radius: np.ndarray
     gripper_opening: np.ndarray
     gripper_palm_radius: np.ndarray
+    user_noise: np.ndarray
+    user_lag: np.ndarray
+    user_tremor: np.ndarray
+    user_tremor_hz: np.ndarray
+    user_seed: np.ndarray
     q_mask: np.ndarray
     q_min: np.ndarray
     q_init: np.ndarray
@@ -220,6 +228,21 @@ def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
         raise InputError(source, fld, "a zero quaternion is not a rotation")
 
 
+def scene_key(scene) -> int:
+    """The scene's own number, in [0, 2^31): a CRC-32 of its name, objects and tasks.
+    It keys the simulated users' random numbers (``shacc_jax.users``), so that a
+    rollout draws the same numbers whatever batch, piece or device it runs in.
+
+    >>> from geometry_precompute import load_scene, shipped_scene_paths
+    >>> a = load_scene(shipped_scene_paths()[0])
+    >>> scene_key(a) == scene_key(load_scene(shipped_scene_paths()[0])) != scene_key(
+    ...     load_scene(shipped_scene_paths()[1]))
+    True
+    """
+    text = repr((scene.name, scene.objects, scene.tasks))
+    return zlib.crc32(text.encode()) & 0x7FFFFFFF
+
+
 def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
          starts: np.ndarray | None = None, max_objects: int | None = None) -> BakedScenes:
     """Bake precomputed scenes into fixed-shape arrays, the one input of the JAX half.
@@ -284,6 +307,10 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params["max_steps"] = np.zeros(S, np.int32)
     params["ambiguity_nearest"] = np.zeros(S, bool)
     params["collision"] = np.zeros(S, bool)
+    params["user_seed"] = np.zeros(S, np.int32)
+    out["scene_key"] = np.array([scene_key(r.scene) for r in results], np.int32)
+    out["start_index"] = np.broadcast_to(np.arange(starts_arr.shape[1], dtype=np.int32),
+                                         starts_arr.shape[:2]).copy()
     O = max(1, max(len(r.scene.objects) for r in results), max_objects or 0)
     out["obj_mask"] = np.zeros((S, O), bool)
     out["obj_kind"] = np.zeros((S, O), np.int32)
@@ -325,6 +352,9 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         params["activation_tol"][si] = s["activation_tol"]
         params["max_steps"][si] = s["max_steps"]
         params["ambiguity_nearest"][si] = s["ambiguity"] == "nearest"
+        for k in ("user_noise", "user_lag", "user_tremor", "user_tremor_hz"):
+            params[k][si] = s[k]
+        params["user_seed"][si] = s["seed"]
     labels = {
         "names": [r.scene.name for r in results],
         "task_ids": [r.task_ids for r in results],

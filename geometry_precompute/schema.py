@@ -72,12 +72,16 @@ GEOMETRY = (
           "fixed orientation; for point-to-axis the one on the axis itself"),
     Field("orient_axis", ("S", "T", 2), "float", "(x, y) of the vertical axis (point-to-axis)"),
     Field("starts", ("S", "N", 7), "float", "start poses [x, y, z, qw, qx, qy, qz]"),
+    Field("start_index", ("S", "N"), "int", "each start's index in the scene's whole start "
+          "grid (a piece of the grid keeps it): keys the simulated users' random numbers"),
     Field("obj_mask", ("S", "O"), "bool", "True for a real object"),
     Field("obj_kind", ("S", "O"), "int", "object body kind (KINDS): cylinder or box"),
     Field("obj_center", ("S", "O", 3), "float", "the object body's centre"),
     Field("obj_quat", ("S", "O", 4), "float", "its rotation (w, x, y, z)"),
     Field("obj_size", ("S", "O", 3), "float",
           "MuJoCo geom size: cylinder (r, half height, 0), box half extents"),
+    Field("scene_key", ("S",), "int", "the scene's own number (a digest of its content, "
+          "in [0, 2^31)): keys the simulated users' random numbers, whatever the batch"),
 )
 
 PARAMS = (
@@ -92,7 +96,14 @@ PARAMS = (
     Field("gripper_finger_radius", ("S",), "float", "gripper.finger_radius, m"),
     Field("gripper_opening", ("S",), "float", "gripper.opening, m"),
     Field("gripper_palm_radius", ("S",), "float", "gripper.palm_radius, m"),
+    Field("user_noise", ("S",), "float", "the user's direction noise, rad"),
+    Field("user_lag", ("S",), "float", "probability that a step repeats the last one"),
+    Field("user_tremor", ("S",), "float", "the user's tremor amplitude, m"),
+    Field("user_tremor_hz", ("S",), "float", "its frequency, Hz"),
+    Field("user_seed", ("S",), "int", "seed of the users' random numbers (the seed setting)"),
 )
+
+USER = ("user_noise", "user_lag", "user_tremor")  # all zero: the perfect user
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),
@@ -158,7 +169,10 @@ class Layout:
     members have horizontal approach frames (Geometry.yaw_meta), "general" when no
     scene's have, "both" otherwise (each kind of lane gets its own pass).
     ``collision_checks``: whether the program checks gripper collisions (some scene's
-    ``collision`` param is on; scenes with it off are not checked). ``box_objects``:
+    ``collision`` param is on; scenes with it off are not checked). ``stepped_users``:
+    whether some scene's simulated user is not the perfect one (a :data:`USER` param
+    above zero): the program then steps every rollout (``shacc_jax.users``) instead of
+    the perfect user's closed form. ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
@@ -172,6 +186,7 @@ class Layout:
     meta_formula: str = "general"
     collision_checks: bool = False
     box_objects: bool = False
+    stepped_users: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
 
@@ -187,6 +202,9 @@ class Layout:
         for name in ("n_tasks", "n_starts", "n_objects", "samples_per_block"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"Layout.{name} must be >= 1, got {getattr(self, name)}")
+        if self.collision_checks and self.stepped_users:
+            raise ValueError("Layout: collision checks are not available with an imperfect "
+                             "simulated user (stepped_users) yet")
         if self.lanes_per_block is not None and int(self.lanes_per_block) < 1:
             raise ValueError(f"Layout.lanes_per_block must be >= 1 or None, got "
                              f"{self.lanes_per_block}")
@@ -203,9 +221,11 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
     collide = bool(np.asarray(arrays.collision).any())
     boxes = collide and bool((np.asarray(arrays.obj_mask)
                               & (np.asarray(arrays.obj_kind) == BOX)).any())
+    stepped = any(bool((np.asarray(getattr(arrays, k)) > 0).any()) for k in USER)
     return Layout(
         n_tasks=arrays.task_mask.shape[-1], n_starts=arrays.starts.shape[-2],
         n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
         meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
-        collision_checks=collide, box_objects=boxes, lanes_per_block=lanes_per_block,
+        collision_checks=collide, box_objects=boxes, stepped_users=stepped,
+        lanes_per_block=lanes_per_block,
         samples_per_block=samples_per_block)

@@ -118,6 +118,12 @@ _SPECS: list[SettingSpec] = [
           ("random", "forward")),
     _spec("seed", 0, "int", "starts", _range(0, INT32_MAX)),
     _spec("collision", "off", "choice", "rollout", _choice("off", "mjx"), ("off", "mjx")),
+    # The simulated user (reference/model, "Simulated users"): all zero is the paper's
+    # perfect user. Angles in rad, lengths in m; the ranges catch degrees and centimetres.
+    _spec("user_noise", 0.0, "float", "rollout", _range(0, math.pi / 2)),
+    _spec("user_lag", 0.0, "float", "rollout", _range(0, 1, hi_open=True)),
+    _spec("user_tremor", 0.0, "float", "rollout", _range(0, 0.05)),
+    _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True)),
     # The gripper of collision = "mjx" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
@@ -176,8 +182,15 @@ _DOCS = {
     "start_y_halfwidth": "start plane's half width around the objects' mean y, m",
     "start_z_range": "start plane's height band [low, high], m",
     "start_orientation": "start orientations: random (seeded) or forward (approach +x)",
-    "seed": "seed of the random start orientations",
+    "seed": "seed of the random start orientations and of the simulated user's random "
+            "numbers",
     "collision": "gripper collision checking: off, or mjx (exact capsule checks, as MuJoCo)",
+    "user_noise": "simulated user: each step's direction turned by |N(0, user_noise^2)| "
+                  "about a random axis across it, rad",
+    "user_lag": "simulated user: probability that a step repeats the previous one",
+    "user_tremor": "simulated user: amplitude of a tremor of the gripper about the "
+                   "commanded position, along a random axis, m",
+    "user_tremor_hz": "simulated user: the tremor's frequency, Hz",
     "gripper.finger_length": "collision gripper: finger capsule length, m",
     "gripper.finger_radius": "collision gripper: finger capsule radius, m",
     "gripper.opening": "collision gripper: distance between the finger axes, m",
@@ -407,6 +420,13 @@ class Settings(Mapping[str, Any]):
                 raise InputError(source, prefix + name,
                                  "unknown setting (`shacc settings` lists them)")
             new[name] = _coerce(spec, value, source, prefix + name)
+        if new["collision"] != "off":
+            imperfect = [k for k in ("user_noise", "user_lag", "user_tremor") if new[k] > 0]
+            if imperfect:
+                raise InputError(source, prefix + imperfect[0],
+                                 "a simulated user other than the perfect one is not checked "
+                                 "for collisions yet: set collision = off, or every user_* "
+                                 "setting to 0")
         out = Settings.__new__(Settings)
         out._values = MappingProxyType(new)
         return out

@@ -144,6 +144,17 @@ def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Arr
     (symmetric scenes) the two sdfs differ only by rounding, and a fixed tolerance
     makes the choice the same in float32, float64 and the NumPy reference."""
     found = jnp.isfinite(act.step)
+    code, activated = outcome_codes(act, target, nearest_rule)
+    k = jnp.where(found, act.step, max_steps.astype(act.step.dtype))
+    return Outcome(code, activated, k.astype(jnp.int32), sample(path, k),
+                   jnp.minimum(k * path.step_length, path.length))
+
+
+def outcome_codes(act: Activation, target: Int[Array, ""],
+                  nearest_rule: Bool[Array, ""]) -> tuple[Int[Array, ""], Int[Array, ""]]:
+    """The outcome code and the activated task (-1 on timeout) of an activation (the
+    rules of :func:`classify`), for every user."""
+    found = jnp.isfinite(act.step)
     smallest = jnp.min(jnp.where(act.active, act.sdf, jnp.inf))
     tied = act.active & (act.sdf <= smallest + TIE)
     nearest = jnp.argmax(tied).astype(jnp.int32)  # the first (lowest) index of the tie
@@ -152,9 +163,7 @@ def classify(act: Activation, target: Int[Array, ""], path: Path, max_steps: Arr
     code_fail = jnp.where(target_in, jnp.where(n_active == 1, SUCCESS, AMBIGUOUS), WRONG)
     code_nearest = jnp.where(nearest == target, SUCCESS, WRONG)
     code = jnp.where(found, jnp.where(nearest_rule, code_nearest, code_fail), TIMEOUT)
-    k = jnp.where(found, act.step, max_steps.astype(act.step.dtype))
-    return Outcome(code.astype(jnp.int32), jnp.where(found, nearest, -1), k.astype(jnp.int32),
-                   sample(path, k), jnp.minimum(k * path.step_length, path.length))
+    return code.astype(jnp.int32), jnp.where(found, nearest, -1)
 
 
 def meta_window(init: shapes.Prepared, mask: Bool[Array, " T"], cluster: Int[Array, " T"],

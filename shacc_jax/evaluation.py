@@ -31,7 +31,7 @@ from geometry_precompute.schema import lanes_per_block_default
 from . import automaton as am
 from . import collision as col
 from . import lanes as lane_scheduler
-from . import tracking
+from . import tracking, users
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
 
@@ -253,12 +253,49 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
         if value != getattr(layout, name):
             raise ValueError(f"Layout.{name} is {getattr(layout, name)} but the geometry "
                              f"has {value} (build the layout from this bake)")
+    if geometry.start_index.shape != geometry.starts.shape[:2]:
+        raise ValueError(f"Geometry.start_index has shape {geometry.start_index.shape}, "
+                         f"the starts {geometry.starts.shape[:2]}")
     ndims = {a.ndim for a in params}
     shapes = {a.shape for a in params}
     if len(shapes) != 1 or ndims - {1, 2} or next(iter(shapes))[-1] != S:
         raise ValueError(f"every Params leaf must have shape (S,) or (P, S) with S = {S} "
                          f"scenes, got {sorted(shapes)}")
     return next(iter(shapes))[0] if ndims == {2} else 0
+
+
+def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
+    """Per mode (Outcome, R, meta steps) of a batch with imperfect simulated users:
+    every rollout stepped (``users.stepped_pass``)."""
+    return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
+                               mode == "shacc", layout.meta_formula)
+            for mode in layout.modes]
+
+
+def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
+    """Per mode (Outcome, R, meta steps) of the perfect user: the activation pass in
+    closed form, then the lane pass where the mode tracks or collisions are checked."""
+    modes = layout.modes
+    passes = {}
+    if "baseline" in modes:
+        passes["init"] = jax.vmap(partial(am.activation_pass, which="init"))(geometry, params)
+    if "shrinking" in modes or "shacc" in modes:
+        passes["opt"] = jax.vmap(partial(am.activation_pass, which="opt"))(geometry, params)
+    S_all, N = geometry.starts.shape[:2]
+    T = geometry.task_mask.shape[1]
+    r0 = jnp.broadcast_to(geometry.starts[:, :, None, 3:], (S_all, N, T, 4))
+    no_meta = jnp.zeros((S_all, N, T), jnp.int32)
+    per_mode = []
+    for mode in modes:
+        path, act, out = passes["init" if mode == "baseline" else "opt"]
+        track = mode == "shacc"
+        if track or layout.collision_checks:
+            r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track)
+            out = _collided(out, path, hit)
+        else:
+            r, meta_steps = r0, no_meta
+        per_mode.append((out, r, meta_steps))
+    return per_mode
 
 
 @partial(jax.jit, static_argnames="layout")
@@ -292,26 +329,8 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         geometry = jax.tree.map(lambda a: jnp.tile(a, (points,) + (1,) * (a.ndim - 1)),
                                 geometry)
         params = jax.tree.map(lambda a: a.reshape(points * S), params)
-    modes = layout.modes
-    passes = {}
-    if "baseline" in modes:
-        passes["init"] = jax.vmap(partial(am.activation_pass, which="init"))(geometry, params)
-    if "shrinking" in modes or "shacc" in modes:
-        passes["opt"] = jax.vmap(partial(am.activation_pass, which="opt"))(geometry, params)
-    S_all, N = geometry.starts.shape[:2]
-    T = geometry.task_mask.shape[1]
-    r0 = jnp.broadcast_to(geometry.starts[:, :, None, 3:], (S_all, N, T, 4))
-    no_meta = jnp.zeros((S_all, N, T), jnp.int32)
-    per_mode = []
-    for mode in modes:
-        path, act, out = passes["init" if mode == "baseline" else "opt"]
-        track = mode == "shacc"
-        if track or layout.collision_checks:
-            r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track)
-            out = _collided(out, path, hit)
-        else:
-            r, meta_steps = r0, no_meta
-        per_mode.append(jax.vmap(_assemble)(geometry, out, r, meta_steps))
+    per_mode = (_stepped if layout.stepped_users else _closed_form)(geometry, params, layout)
+    per_mode = [jax.vmap(_assemble)(geometry, *one) for one in per_mode]
     rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)
     result = Evaluation(rollouts, batch_metrics(rollouts.outcome, rollouts.delta_R,
                                                 geometry.task_mask))

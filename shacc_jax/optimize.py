@@ -68,7 +68,10 @@ def objective(geometry: Geometry, params: Params, pb: SearchProblem, q: Array
     scene's candidate q (T, P); u_scene is successes / (search starts x tasks)."""
     g = geometry
     center, dims = spaces_at(g.center_init, g.dims_init, pb, q)
-    cand = g._replace(starts=pb.opt_starts, center_opt=center, dims_opt=dims)
+    # The search scores with the perfect user (the closed form), on its own starts.
+    index = jnp.arange(pb.opt_starts.shape[0], dtype=g.start_index.dtype)
+    cand = g._replace(starts=pb.opt_starts, start_index=index, center_opt=center,
+                      dims_opt=dims)
     _, _, out = activation_pass(cand, params, "opt")  # outcomes (No, T)
     counted = pb.opt_start_mask[:, None] & g.task_mask[None, :]
     hits = jnp.sum((out.code == SUCCESS) & counted, dtype=jnp.int32)

@@ -112,7 +112,9 @@ class RunPlan:
             f"{lay.n_tasks} tasks (padded) x {len(lay.modes)} modes "
             f"({', '.join(lay.modes)})",
             f"program: meta formula {lay.meta_formula}, collision checks "
-            f"{'on' if lay.collision_checks else 'off'}, blocks of {lay.lanes_per_block} "
+            f"{'on' if lay.collision_checks else 'off'}, "
+            f"{'stepped (imperfect users)' if lay.stepped_users else 'closed-form'} "
+            f"rollouts, blocks of {lay.lanes_per_block} "
             f"lanes x {lay.samples_per_block} samples",
             f"memory: {_size(self.bytes_per_piece)} per piece of a budget of "
             f"{_size(self.budget)}: {len(self.pieces)} piece(s) of "
@@ -344,7 +346,8 @@ def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
     with ThreadPoolExecutor(len(devices)) as pool:
         for first in p.pieces:
             idx = np.minimum(np.arange(first, first + n), N - 1)  # the last piece padded
-            piece = geometry if n == N else geometry._replace(starts=geometry.starts[:, idx])
+            piece = geometry if n == N else geometry._replace(
+                starts=geometry.starts[:, idx], start_index=geometry.start_index[:, idx])
             if len(devices) == 1:
                 outs = [_on_device(devices[0], *part(0, piece), p.layout, p.fields)]
             else:

@@ -107,11 +107,13 @@ class Geometry(NamedTuple):
     orient_quat: Float[Array, "S T 4"]
     orient_axis: Float[Array, "S T 2"]
     starts: Float[Array, "S N 7"]
+    start_index: Int[Array, "S N"]
     obj_mask: Bool[Array, "S O"]
     obj_kind: Int[Array, "S O"]
     obj_center: Float[Array, "S O 3"]
     obj_quat: Float[Array, "S O 4"]
     obj_size: Float[Array, "S O 3"]
+    scene_key: Int[Array, " S"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Geometry:
@@ -144,6 +146,11 @@ class Params(NamedTuple):
     gripper_finger_radius: Float[Array, "*P S"]
     gripper_opening: Float[Array, "*P S"]
     gripper_palm_radius: Float[Array, "*P S"]
+    user_noise: Float[Array, "*P S"]
+    user_lag: Float[Array, "*P S"]
+    user_tremor: Float[Array, "*P S"]
+    user_tremor_hz: Float[Array, "*P S"]
+    user_seed: Int[Array, "*P S"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:

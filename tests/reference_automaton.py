@@ -204,8 +204,39 @@ class Result:
     quat: np.ndarray  # R at the end (w, x, y, z)
 
 
-def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
-    """One rollout from baked arrays (float64), SPEC section 9 step by step."""
+def turn_across(u, angle: float, axis_angle: float) -> np.ndarray:
+    """u turned by ``angle`` about a = cos(psi) e1 + sin(psi) e2 (scipy's rotation
+    vectors), the basis (e1, e2, u) right-handed and e1 from the world x axis (y where
+    |u_x| > 0.9): the convention the kernel's random numbers are defined in."""
+    h = np.array([0.0, 1.0, 0.0]) if abs(u[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = h - (h @ u) * u
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    axis = math.cos(axis_angle) * e1 + math.sin(axis_angle) * e2
+    return Rotation.from_rotvec(angle * axis).apply(u)
+
+
+@dataclass
+class User:
+    """A simulated user (the user_* settings) with its random numbers, given as arrays
+    (the kernel's stream: ``shacc_jax.users.user_draws``): per step |N(0, 1)|, the
+    noise axis' angle and the lag's uniform number; once per rollout the tremor's axis
+    and phase."""
+
+    noise: float
+    lag: float
+    tremor: float
+    tremor_hz: float
+    steps: tuple  # (n,), (n,), (n,)
+    tremor_axis: np.ndarray
+    tremor_phase: float
+
+
+def rollout(baked, scene: int, mode: str, start: int, target: int,
+            user: User | None = None) -> Result:
+    """One rollout from baked arrays (float64), SPEC section 9 step by step; with
+    ``user``, the imperfect user of the model page's "Simulated users" (direction
+    noise, lag, tremor) instead of the perfect one."""
     T = int(baked.task_mask[scene].sum())
     which = "init" if mode == "baseline" else "opt"
 
@@ -236,17 +267,36 @@ def rollout(baked, scene: int, mode: str, start: int, target: int) -> Result:
     def collided(step):
         return Result("collision", -1, step, p, np.nan, meta_steps, travelled, _wxyz(r))
 
+    q, last = p.copy(), np.zeros(3)
+
+    def gripper(k):  # the commanded position plus the tremor at step k
+        if user is None:
+            return q.copy()
+        wave = math.sin(2 * math.pi * user.tremor_hz * k * dt + user.tremor_phase)
+        return q + user.tremor * wave * np.asarray(user.tremor_axis, float)
+
+    p = gripper(0)
     # Collision checks come first: a skill never activates at a penetrating pose.
     if collider is not None and collider.penetrates(p, r):
         return collided(0)
     sd, act = check(p)
     step = 0
     while act.size == 0 and step < max_steps:
-        step += 1
         c = active[target].project(p)
         gap = np.linalg.norm(c - p)
-        move = (c - p) * (min(1.0, v_max * dt / gap) if gap > 0 else 0.0)
-        p = p + move
+        if user is not None and step > 0 and user.steps[2][step] < user.lag:
+            move = last  # the previous step again
+        elif gap > 0:
+            u = (c - p) / gap
+            if user is not None:
+                u = turn_across(u, user.noise * user.steps[0][step], user.steps[1][step])
+            move = u * min(v_max * dt, gap)
+        else:
+            move = np.zeros(3)
+        step += 1
+        q = q + move
+        last = move
+        p = gripper(step)
         travelled += float(np.linalg.norm(move))
         if collider is not None and collider.penetrates(p, r):
             return collided(step)

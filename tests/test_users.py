@@ -1,0 +1,185 @@
+"""Simulated users beyond the perfect one (shacc_jax.users): the stepped kernel against
+the NumPy Automaton driven by the same random numbers, the perfect user stepped against
+the closed form, the random numbers' distributions and their independence of the
+batch, the mode and the device split."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import jax
+import numpy as np
+import pytest
+from reference_automaton import OUTCOME_NAMES, User, rollout, turn_across
+from scipy import stats
+
+import shacc_jax
+from geometry_precompute import (
+    DEFAULTS,
+    InputError,
+    bake,
+    load_scene,
+    precompute,
+    random_scene,
+    shipped_scene_paths,
+)
+from shacc_jax import runplan, users
+
+USERS = {
+    "noise": {"user_noise": 0.3},
+    "lag": {"user_lag": 0.3},
+    "tremor": {"user_tremor": 0.01, "user_tremor_hz": 3.0},
+    "all": {"user_noise": 0.2, "user_lag": 0.2, "user_tremor": 0.008},
+}
+
+
+def _evaluate(baked, x64=False, **layout):
+    with jax.enable_x64(x64):
+        g, p, lay = shacc_jax.inputs(baked, dtype=np.float64 if x64 else np.float32)
+        ev = shacc_jax.evaluate(g, p, replace(lay, **layout))
+        return jax.tree.map(np.asarray, ev)
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    """Three shipped scenes (uncluttered and cluttered) and a random one, on a 2 x 3
+    start grid, precomputed once."""
+    grid = {"start_grid": [2, 3]}
+    paths = shipped_scene_paths()
+    picked = [load_scene(paths[i]) for i in (0, 6, 9)]
+    picked += [random_scene(1, "uniform", 5, 8, "paper")]
+    return [precompute(s, s.settings(DEFAULTS, grid)) for s in picked]
+
+
+def _bake(results, overrides):
+    return bake([replace(r, settings=r.settings.with_overrides(overrides)) for r in results])
+
+
+def test_the_perfect_user_stepped_is_the_closed_form(scenes):
+    """A perfect user's lanes take the closed form's sample positions: stepping them
+    changes no bit of any rollout field of a real task, in any mode (a padded task's
+    rollout is not stepped)."""
+    baked = bake(scenes)
+    closed = _evaluate(baked)
+    stepped = _evaluate(baked, stepped_users=True)
+    real = closed.rollouts.outcome != shacc_jax.types.INVALID
+    assert real.sum() == 3 * 6 * sum(len(r.spaces) for r in scenes)
+    for name in closed.rollouts._fields:
+        a, b = getattr(closed.rollouts, name), getattr(stepped.rollouts, name)
+        assert np.array_equal(a[real], b[real], equal_nan=True), name
+
+
+def _draws(baked, scene: int, n_steps: int):
+    """Every rollout's random numbers of one scene, (N, T), from the kernel's stream."""
+    N, T = baked.n_starts, baked.n_tasks
+    draw = jax.jit(jax.vmap(jax.vmap(
+        lambda n, t: users.user_draws(baked.user_seed[scene], baked.scene_key[scene], t, n,
+                                      n_steps, np.float64), (None, 0)), (0, None)))
+    steps, once = draw(np.arange(N, dtype=np.int32), np.arange(T, dtype=np.int32))
+    return jax.tree.map(np.asarray, steps), jax.tree.map(np.asarray, once)
+
+
+@pytest.mark.parametrize("name", list(USERS))
+def test_stepped_users_agree_with_the_reference(scenes, name):
+    """Each user parameter alone, and all together: every rollout of every mode equals
+    the NumPy Automaton's, stepped literally with the same random numbers (float64)."""
+    overrides = {"user_tremor_hz": 5.0, **USERS[name]}
+    baked = _bake(scenes, overrides)
+    with jax.enable_x64(True):
+        ev = _evaluate(baked, x64=True)
+        assert shacc_jax.inputs(baked)[2].stepped_users
+        checked = 0
+        for s, r in enumerate(scenes):
+            steps, once = _draws(baked, s, int(baked.max_steps[s]) + 1)
+            for n in range(baked.n_starts):
+                for t in range(len(r.spaces)):
+                    user = User(overrides.get("user_noise", 0.0), overrides.get("user_lag", 0.0),
+                                overrides.get("user_tremor", 0.0), overrides["user_tremor_hz"],
+                                (steps.noise[n, t], steps.axis_angle[n, t], steps.lag[n, t]),
+                                once.tremor_axis[n, t], float(once.tremor_phase[n, t]))
+                    for m, mode in enumerate(shacc_jax.MODES):
+                        ref = rollout(baked, s, mode, n, t, user)
+                        ro = ev.rollouts
+                        got = (OUTCOME_NAMES[ro.outcome[s, m, n, t]], int(ro.activated[s, m, n, t]),
+                               int(ro.step[s, m, n, t]), int(ro.meta_steps[s, m, n, t]))
+                        assert got == (ref.outcome, ref.activated, ref.step, ref.meta_steps), \
+                            (s, mode, n, t)
+                        np.testing.assert_allclose(ro.point[s, m, n, t], ref.point, atol=1e-8)
+                        assert abs(ro.path_length[s, m, n, t] - ref.path_length) < 1e-8
+                        dr, ref_dr = ro.delta_R[s, m, n, t], ref.delta_R
+                        assert (np.isnan(dr) and np.isnan(ref_dr)) or abs(dr - ref_dr) < 1e-6
+                        checked += 1
+    assert checked == 3 * 6 * sum(len(r.spaces) for r in scenes)
+    # The user changed something: not every rollout is the perfect user's.
+    perfect = _evaluate(bake(scenes), x64=False)
+    assert (perfect.rollouts.step != ev.rollouts.step).any()
+
+
+def test_noise_angles_follow_their_distribution():
+    """The angle between a direction and its noisy version is |N(0, sigma^2)| and the
+    axis it turns about is uniform on the circle across it (Kolmogorov-Smirnov), from
+    the kernel's own random numbers and turning function."""
+    steps, _ = users.user_draws(0, 12345, 2, 7, n_steps=4000)
+    sigma = 0.3
+    u = np.array([0.3, -0.5, 0.81])
+    u /= np.linalg.norm(u)
+    turned = np.asarray(jax.vmap(lambda a, psi: users.turn_across(
+        np.asarray(u, np.float32), sigma * a, psi))(steps.noise, steps.axis_angle))
+    angle = np.arccos(np.clip(turned @ u, -1, 1))
+    assert stats.kstest(angle, stats.halfnorm(scale=sigma).cdf).pvalue > 1e-3
+    assert stats.kstest(np.asarray(steps.axis_angle), stats.uniform(0, 2 * np.pi).cdf
+                        ).pvalue > 1e-3
+    # The kernel's turn is the reference's (scipy's rotation vectors).
+    noise, psi = (np.asarray(a[:50], float) for a in (steps.noise, steps.axis_angle))
+    ref = np.array([turn_across(u, sigma * a, b) for a, b in zip(noise, psi, strict=True)])
+    np.testing.assert_allclose(turned[:50], ref, atol=2e-6)
+
+
+def test_lag_repeats_a_step_with_its_probability():
+    """Over many steps and rollouts a step lags (its uniform number below user_lag)
+    with probability user_lag (binomial test), and the tremor axes are uniform on the
+    sphere (their z uniform in [-1, 1])."""
+    draw = jax.vmap(lambda start: users.user_draws(3, 99, 0, start, n_steps=200))
+    steps, once = draw(np.arange(100, dtype=np.int32))
+    lag = np.asarray(steps.lag)
+    for p in (0.05, 0.2, 0.5):
+        k = int((lag < p).sum())
+        assert stats.binomtest(k, lag.size, p).pvalue > 1e-3, (p, k, lag.size)
+    axes = np.asarray(once.tremor_axis)
+    np.testing.assert_allclose(np.linalg.norm(axes, axis=1), 1.0, atol=1e-6)
+    assert stats.kstest(axes[:, 2], stats.uniform(-1, 2).cdf).pvalue > 1e-3
+
+
+def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
+    """The stream is keyed by (seed, scene, task, start): a scene alone, and inside a
+    batch of seven, split into pieces by a small memory budget over two CPU devices,
+    gives the same rollouts; and on a scene whose spaces Shrinking leaves alone the
+    baseline and shrinking modes (the same spaces, the same draws) agree rollout for
+    rollout."""
+    overrides = USERS["all"]
+    alone = shacc_jax.run(_bake(scenes[1:2], overrides), shacc_jax.MODES).evaluation
+    batch = _bake([*scenes, *scenes[:3]], overrides)  # seven scenes
+    devices = jax.devices("cpu")[:2]
+    per_start = runplan.bytes_per_rollout(False) * batch.n_scenes * batch.n_tasks * 3
+    plan = shacc_jax.plan(batch, shacc_jax.MODES, budget_bytes=4 * per_start, devices=devices)
+    assert len(plan.pieces) > 1 and len(plan.devices) == 2
+    inside = shacc_jax.execute(plan, batch)
+    for name in ("outcome", "activated", "step", "meta_steps", "delta_R"):
+        a = np.asarray(getattr(alone.rollouts, name))[0]
+        b = np.asarray(getattr(inside.rollouts, name))[1, :, :, : a.shape[-1]]
+        assert np.array_equal(a, b, equal_nan=True), name
+    unshrunk = [i for i, r in enumerate(scenes) if r.C_init == 0]
+    assert unshrunk
+    ev = jax.tree.map(np.asarray, inside)
+    for i in unshrunk:
+        assert np.array_equal(ev.rollouts.outcome[i, 0], ev.rollouts.outcome[i, 1])
+        assert np.array_equal(ev.rollouts.point[i, 0], ev.rollouts.point[i, 1])
+
+
+def test_user_settings_have_ranges_and_no_collisions_yet():
+    for name, bad in (("user_noise", 10.0), ("user_lag", 1.0), ("user_tremor", 1.0),
+                      ("user_tremor_hz", 0.0), ("user_noise", -0.1)):
+        with pytest.raises(InputError, match=name):
+            DEFAULTS.with_overrides({name: bad})
+    with pytest.raises(InputError, match=r"user_lag.*collision"):
+        DEFAULTS.with_overrides({"collision": "mjx", "user_lag": 0.1})
