@@ -57,9 +57,10 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
-def _load_bake(path: str, n: int, collision: bool = False):
+def _load_bake(path: str, n: int, collision: bool = False, user=None):
     """The first n scenes of a bake file (repeated if it holds fewer), as an object with
-    the bake's arrays as attributes."""
+    the bake's arrays as attributes; ``user``: (user_noise, user_lag, user_tremor) for
+    every scene (an imperfect simulated user, stepped)."""
     from types import SimpleNamespace
 
     data = np.load(path)
@@ -73,18 +74,20 @@ def _load_bake(path: str, n: int, collision: bool = False):
         a = data[k]
         if k == "collision":
             a = np.full_like(a, collision)
+        if user is not None and k in schema.USER:
+            a = np.full_like(a, user[schema.USER.index(k)])
         arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
     return SimpleNamespace(**arrays)
 
 
 def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=None,
-          chunk: int = 16):
+          chunk: int = 16, user=None):
     """(geometry, params, layout) of the first n scenes of a bake file (repeated if it
     holds fewer)."""
     import shacc_jax
 
-    return shacc_jax.inputs(_load_bake(path, n, collision), modes, lanes_per_block=block,
-                            samples_per_block=chunk)
+    return shacc_jax.inputs(_load_bake(path, n, collision, user), modes,
+                            lanes_per_block=block, samples_per_block=chunk)
 
 
 def _regrid(geometry, ny: int, nz: int):
@@ -103,7 +106,8 @@ def _regrid(geometry, ny: int, nz: int):
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     quats = np.broadcast_to(q, (S, ny * nz, 4))
     new = np.concatenate([np.stack([xx, yy, zz], -1), quats], -1).astype(st.dtype)
-    return geometry._replace(starts=jnp.asarray(new))
+    index = np.broadcast_to(np.arange(ny * nz, dtype=np.int32), (S, ny * nz))
+    return geometry._replace(starts=jnp.asarray(new), start_index=jnp.asarray(index))
 
 
 def cmd_run(args) -> None:
@@ -120,7 +124,7 @@ def cmd_run(args) -> None:
         return _run_devices(args, modes)
     for n in args.sizes:
         geometry, params, layout = _load(args.bake, n, args.collision, modes, args.block,
-                                         args.chunk)
+                                         args.chunk, args.user)
         if args.grid:
             geometry = _regrid(geometry, *args.grid)
             layout = dataclasses.replace(layout, n_starts=geometry.starts.shape[1])
@@ -142,8 +146,9 @@ def cmd_run(args) -> None:
         row = {"device": str(dev), "platform": dev.platform, "scenes": S, "tasks": T,
                "starts": N, "modes": len(modes), "rollouts": rollouts,
                "block": layout.lanes_per_block or schema.lanes_per_block_default(
-                   jax.default_backend(), layout.collision_checks),
+                   jax.default_backend(), layout.collision_checks, layout.stepped_users),
                "chunk": layout.samples_per_block, "collision": args.collision,
+               "user": args.user, "stepped": layout.stepped_users,
                "meta": layout.meta_formula,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
@@ -261,6 +266,8 @@ def main() -> None:
                    help="time shacc_jax.run planned over these device counts")
     r.add_argument("--collision", action="store_true",
                    help='collision = "mjx" for every scene (the bake holds the objects)')
+    r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
+                   help="an imperfect simulated user in every scene (stepped rollouts)")
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     q = sub.add_parser("points")

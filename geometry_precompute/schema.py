@@ -142,20 +142,27 @@ def per_task(fields) -> frozenset[str]:
     return frozenset(f.name for f in fields if f.shape[1:2] == ("T",))
 
 
-def lanes_per_block_default(backend: str, collision_checks: bool = False) -> int:
+def lanes_per_block_default(backend: str, collision_checks: bool = False,
+                            stepped_users: bool = False) -> int:
     """Lanes per block of the lane scheduler: large on accelerators (each block is one
     sequence of kernel launches), small on CPU (less spread within a block). With
     collision checks a block holds lanes x samples x capsules x objects pairs, and an
     accelerator's takes half as many lanes (measured on an H100, a quarter, half and
     all of them: 0.63, 0.59, 0.72 s for 10 000 scenes; benchmarks/RESULTS.md); a CPU's
-    keeps all of them (fewer, fuller rounds of the exact search).
+    keeps all of them (fewer, fuller rounds of the exact search). Stepped users
+    (``shacc_jax.users``) step a block until its slowest lane ends: larger blocks, as
+    each step's operations cost the CPU a fixed overhead per block (4096 lanes: 30 s
+    for 216 000 rollouts on 2 cores, against 76 s with 256 and 36 s with 16 384).
 
     >>> lanes_per_block_default("gpu"), lanes_per_block_default("gpu", True)
     (131072, 65536)
-    >>> lanes_per_block_default("cpu", True)
-    256
+    >>> lanes_per_block_default("cpu", True), lanes_per_block_default("cpu", stepped_users=True)
+    (256, 4096)
     """
-    if backend in ("gpu", "cuda", "rocm", "tpu"):
+    accelerator = backend in ("gpu", "cuda", "rocm", "tpu")
+    if stepped_users:
+        return 1 << 20 if accelerator else 1 << 12
+    if accelerator:
         return 1 << 16 if collision_checks else 1 << 17
     return 1 << 8
 

@@ -267,8 +267,10 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
 def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     """Per mode (Outcome, R, meta steps) of a batch with imperfect simulated users:
     every rollout stepped (``users.stepped_pass``)."""
+    lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
+        jax.default_backend(), stepped_users=True)
     return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
-                               mode == "shacc", layout.meta_formula)
+                               mode == "shacc", layout.meta_formula, lanes_per_block)
             for mode in layout.modes]
 
 

@@ -255,7 +255,8 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         arrays.update(_stacked_params(points)._asdict())
         layout = batch_layout(SimpleNamespace(**arrays), modes)
     layout = replace(layout, lanes_per_block=layout.lanes_per_block
-                     or lanes_per_block_default(backend, layout.collision_checks))
+                     or lanes_per_block_default(backend, layout.collision_checks,
+                                                layout.stepped_users))
     per_start = (bytes_per_rollout(layout.collision_checks, backend)
                  * S * T * len(modes) * (P or 1))
     # At least two starts in every program, even a one-start grid (padded by repeating

@@ -232,29 +232,52 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
 
 
 def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
-                 formula: str) -> tuple[am.Outcome, Array, Array]:
+                 formula: str, lanes_per_block: int) -> tuple[am.Outcome, Array, Array]:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
     T, 4) and the meta steps (S, N, T). ``which``: the mode's spaces (``init`` or
-    ``opt``); ``track``: with the meta skill; ``formula``: ``Layout.meta_formula``."""
+    ``opt``); ``track``: with the meta skill; ``formula``: ``Layout.meta_formula``.
 
-    def per_scene(g: Geometry, x: Params):
-        spaces = g.spaces(which)
-        meta = None
-        if track:
-            fixed_dir, _ = yaw_directions(g.orient_quat)
-            meta = (_components_first(g.spaces("init")), _components_first(g.spaces("opt")),
-                    fixed_dir)
+    The lanes (scene, start, task) run in blocks of ``lanes_per_block``, one block after
+    another, each stepping until its last lane ends (an activation or max_steps): a
+    block is only as long as its slowest lane, not the batch's. The lanes are sorted by
+    the perfect user's landing step first, so that a block's lanes take about as many
+    steps as each other; padded tasks come last and take none."""
+    S, N, T = geometry.starts.shape[0], geometry.starts.shape[1], geometry.task_mask.shape[1]
+    L = S * N * T
+    spaces = jax.vmap(lambda g: g.spaces(which))(geometry)
+    meta = None
+    if track:
+        meta = jax.vmap(lambda g: (_components_first(g.spaces("init")),
+                                   _components_first(g.spaces("opt")),
+                                   yaw_directions(g.orient_quat)[0]))(geometry)
+    scene = jnp.repeat(jnp.arange(S, dtype=jnp.int32), N * T)
+    start = jnp.tile(jnp.repeat(jnp.arange(N, dtype=jnp.int32), T), S)
+    task = jnp.tile(jnp.arange(T, dtype=jnp.int32), S * N)
 
-        def one(start_pose, start, target):
-            return _rollout(g, x, spaces, meta, formula, start_pose[:3], start_pose[3:],
-                            target, start, track)
+    def landing(s, n, t):
+        x = am.rollout_numbers(jax.tree.map(lambda a: a[s], params), geometry.starts.dtype)
+        path = am.straight_path(jax.tree.map(lambda a: a[s], spaces), t,
+                                geometry.starts[s, n, :3], x["step_length"], x["max_steps"])
+        return jnp.where(geometry.task_mask[s, t], path.landing, -1.0)
 
-        over_tasks = jax.vmap(one, (None, None, 0))
-        T = g.task_mask.shape[0]
-        return jax.vmap(over_tasks, (0, 0, None))(g.starts, g.start_index,
-                                                  jnp.arange(T, dtype=jnp.int32))
+    B = min(lanes_per_block, L)
+    n_blocks = -(-L // B)
+    order = jnp.argsort(-jax.vmap(landing)(scene, start, task))
+    order = jnp.concatenate([order, jnp.full(n_blocks * B - L, order[-1])])
 
-    return jax.vmap(per_scene)(geometry, params)
+    def one(lane):
+        s, n, t = scene[lane], start[lane], task[lane]
+        pick = (lambda a: a[s])  # noqa: E731
+        g, x = jax.tree.map(pick, geometry), jax.tree.map(pick, params)
+        pose = geometry.starts[s, n]
+        return _rollout(g, x, jax.tree.map(pick, spaces),
+                        None if meta is None else jax.tree.map(pick, meta), formula,
+                        pose[:3], pose[3:], t, geometry.start_index[s, n], track)
+
+    out = jax.lax.map(jax.vmap(one), order.reshape(n_blocks, B))
+    inverse = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))
+    return jax.tree.map(lambda a: a.reshape(n_blocks * B, *a.shape[2:])[inverse].reshape(
+        S, N, T, *a.shape[2:]), out)
 
 
 def perfect(params: Params) -> Bool[Array, "..."]:
