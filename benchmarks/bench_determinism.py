@@ -44,7 +44,8 @@ def main() -> None:
         bad = 0
         for a in range(0, N - 1, size):
             idx = np.arange(a, min(a + size, N))
-            part = run(replace(baked, starts=baked.starts[:, idx]))
+            part = run(replace(baked, starts=baked.starts[:, idx],
+                               start_index=baked.start_index[:, idx]))
             bad += sum(int(np.sum(np.take(getattr(whole, f), idx, axis=2).view(np.uint8)
                                   != getattr(part, f).view(np.uint8)))
                        for f in whole._fields)

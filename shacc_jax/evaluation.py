@@ -255,7 +255,8 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
                              f"has {value} (build the layout from this bake)")
     if geometry.start_index.shape != geometry.starts.shape[:2]:
         raise ValueError(f"Geometry.start_index has shape {geometry.start_index.shape}, "
-                         f"the starts {geometry.starts.shape[:2]}")
+                         f"the starts {geometry.starts.shape[:2]} (replace both together: "
+                         "each start's index in its whole grid)")
     ndims = {a.ndim for a in params}
     shapes = {a.shape for a in params}
     if len(shapes) != 1 or ndims - {1, 2} or next(iter(shapes))[-1] != S:

@@ -44,7 +44,8 @@ def test_any_split_of_the_start_grid_gives_the_same_bits(batch):
     for size in (2, 5):  # pieces of 2 and 5 (the last one of 2): the shapes below
         for a in range(0, N - 1, size):
             idx = np.arange(a, min(a + size, N))
-            part = _run(replace(batch, starts=batch.starts[:, idx]))
+            part = _run(replace(batch, starts=batch.starts[:, idx],
+                                start_index=batch.start_index[:, idx]))
             for name in whole._fields:
                 assert _same_bits(np.take(getattr(whole, name), idx, axis=2),
                                   getattr(part, name)), (name, size, a)

@@ -174,7 +174,7 @@ def test_the_plan_is_a_pure_function_of_the_bake_and_its_arguments(shipped_resul
     one = plan(baked, budget_bytes=2**40, devices=["cpu:0"], backend="cpu")
     assert one.pieces == (0,) and one.padded_scenes == 5 and one.layout.lanes_per_block == 256
     # A one-start grid still runs programs of two starts (the start repeated).
-    single = replace(baked, starts=baked.starts[:, :1])
+    single = replace(baked, starts=baked.starts[:, :1], start_index=baked.start_index[:, :1])
     assert plan(single, budget_bytes=2**40, devices=["cpu:0"]).starts_per_piece == 2
 
 
