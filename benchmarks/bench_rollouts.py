@@ -74,7 +74,7 @@ def _load_bake(path: str, n: int, collision: bool = False, user=None):
         a = data[k]
         if k == "collision":
             a = np.full_like(a, collision)
-        if user is not None and k in schema.USER:
+        if user is not None and k in schema.USER[:3]:
             a = np.full_like(a, user[schema.USER.index(k)])
         arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
     return SimpleNamespace(**arrays)

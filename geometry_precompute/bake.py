@@ -62,6 +62,7 @@ class BakedScenes:
     orient_kind: np.ndarray
     orient_quat: np.ndarray
     orient_axis: np.ndarray
+    aim_point: np.ndarray
     starts: np.ndarray
     start_index: np.ndarray
     obj_mask: np.ndarray
@@ -86,6 +87,7 @@ class BakedScenes:
     user_tremor: np.ndarray
     user_tremor_hz: np.ndarray
     user_seed: np.ndarray
+    user_aim_object: np.ndarray
     q_mask: np.ndarray
     q_min: np.ndarray
     q_init: np.ndarray
@@ -297,6 +299,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         "orient_kind": np.zeros((S, T), np.int32),
         "orient_quat": np.tile([1.0, 0.0, 0.0, 0.0], (S, T, 1)),
         "orient_axis": np.zeros((S, T, 2)),
+        "aim_point": np.zeros((S, T, 3)),
         "yaw_meta": np.zeros(S, bool),
     }
     for which in ("init", "opt"):
@@ -308,6 +311,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params["ambiguity_nearest"] = np.zeros(S, bool)
     params["collision"] = np.zeros(S, bool)
     params["user_seed"] = np.zeros(S, np.int32)
+    params["user_aim_object"] = np.zeros(S, bool)
     out["scene_key"] = np.array([scene_key(r.scene) for r in results], np.int32)
     out["start_index"] = np.broadcast_to(np.arange(starts_arr.shape[1], dtype=np.int32),
                                          starts_arr.shape[:2]).copy()
@@ -343,6 +347,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
             out["orient_kind"][si, ti] = schema.ORIENT_KINDS.index(o.kind)
             out["orient_quat"][si, ti] = o.quat
             out["orient_axis"][si, ti] = o.axis_xy
+            out["aim_point"][si, ti] = space.aim_point
         for label, members in enumerate(r.meta_clusters()):
             out["cluster"][si, members] = label
         out["yaw_meta"][si] = all(is_horizontal_approach(out["orient_quat"][si, t])
@@ -355,6 +360,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         for k in ("user_noise", "user_lag", "user_tremor", "user_tremor_hz"):
             params[k][si] = s[k]
         params["user_seed"][si] = s["seed"]
+        params["user_aim_object"][si] = s["user_aim"] == "object"
     labels = {
         "names": [r.scene.name for r in results],
         "task_ids": [r.task_ids for r in results],

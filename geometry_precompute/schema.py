@@ -71,6 +71,8 @@ GEOMETRY = (
     Field("orient_quat", ("S", "T", 4), "float",
           "fixed orientation; for point-to-axis the one on the axis itself"),
     Field("orient_axis", ("S", "T", 2), "float", "(x, y) of the vertical axis (point-to-axis)"),
+    Field("aim_point", ("S", "T", 3), "float", "where a user aiming at the object steers "
+          "(user_aim = object; per template, reference/scenes)"),
     Field("starts", ("S", "N", 7), "float", "start poses [x, y, z, qw, qx, qy, qz]"),
     Field("start_index", ("S", "N"), "int", "each start's index in the scene's whole start "
           "grid (a piece of the grid keeps it): keys the simulated users' random numbers"),
@@ -101,9 +103,12 @@ PARAMS = (
     Field("user_tremor", ("S",), "float", "the user's tremor amplitude, m"),
     Field("user_tremor_hz", ("S",), "float", "its frequency, Hz"),
     Field("user_seed", ("S",), "int", "seed of the users' random numbers (the seed setting)"),
+    Field("user_aim_object", ("S",), "bool", "user_aim = object: the user steers at the "
+          "task's aim point, not at its space"),
 )
 
-USER = ("user_noise", "user_lag", "user_tremor")  # all zero: the perfect user
+# All zero (and user_aim_object False): the perfect user.
+USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object")
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),

@@ -124,6 +124,8 @@ _SPECS: list[SettingSpec] = [
     _spec("user_lag", 0.0, "float", "rollout", _range(0, 1, hi_open=True)),
     _spec("user_tremor", 0.0, "float", "rollout", _range(0, 0.05)),
     _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True)),
+    _spec("user_aim", "space", "choice", "rollout", _choice("space", "object"),
+          ("space", "object")),
     # The gripper of collision = "mjx" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
@@ -191,6 +193,8 @@ _DOCS = {
     "user_tremor": "simulated user: amplitude of a tremor of the gripper about the "
                    "commanded position, along a random axis, m",
     "user_tremor_hz": "simulated user: the tremor's frequency, Hz",
+    "user_aim": "simulated user: steers at the closest point of its task's space, or at "
+                "the object (the template's aim point)",
     "gripper.finger_length": "collision gripper: finger capsule length, m",
     "gripper.finger_radius": "collision gripper: finger capsule radius, m",
     "gripper.opening": "collision gripper: distance between the finger axes, m",
@@ -422,6 +426,7 @@ class Settings(Mapping[str, Any]):
             new[name] = _coerce(spec, value, source, prefix + name)
         if new["collision"] != "off":
             imperfect = [k for k in ("user_noise", "user_lag", "user_tremor") if new[k] > 0]
+            imperfect += ["user_aim"] if new["user_aim"] != "space" else []
             if imperfect:
                 raise InputError(source, prefix + imperfect[0],
                                  "a simulated user other than the perfect one is not checked "

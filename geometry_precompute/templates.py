@@ -44,6 +44,11 @@ class TaskSpace:
     orientation: OrientationSpace
     pose_quat: tuple[float, float, float, float]  # the space's rotation; fixed by the template
 
+    @property
+    def aim_point(self) -> tuple[float, float, float]:
+        """Where a user aiming at the object steers (:func:`aim_point`)."""
+        return aim_point(self.template, self.obj, self.fixed)
+
     def shape(self, q: np.ndarray | None = None) -> Shape:
         q = self.q_init if q is None else np.asarray(q, dtype=np.float64)
         return self.shape_of(tuple(float(v) for v in q))
@@ -60,6 +65,23 @@ class TaskSpace:
             return None
         return _build_shape(self.template, self.obj, self.q_init, self.fixed,
                             self.pose_quat).center
+
+
+def aim_point(template: str, obj: SceneObject, fixed: dict) -> tuple[float, float, float]:
+    """Where a user who aims at the object steers for this template (``user_aim =
+    "object"``): the side grasp's point on the object's axis at half the space's height,
+    the handle grasp point g, the top centre of the object, the centre of the drawer's
+    face."""
+    x, y, z = obj.position
+    if template == "side_grasp":
+        return (x, y, z + fixed["height"] / 2)
+    if template == "handle_grasp":
+        g, _ = handle_point(obj, fixed["handle_offset"])
+        return (float(g[0]), float(g[1]), float(g[2]))
+    if template == "top_grasp":
+        return (x, y, z + obj.body_height)
+    ex, _, ez = obj.box_half_extents
+    return (x - np.cos(obj.yaw) * ex, y - np.sin(obj.yaw) * ex, z + ez)
 
 
 def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:

@@ -106,6 +106,7 @@ class Geometry(NamedTuple):
     orient_kind: Int[Array, "S T"]
     orient_quat: Float[Array, "S T 4"]
     orient_axis: Float[Array, "S T 2"]
+    aim_point: Float[Array, "S T 3"]
     starts: Float[Array, "S N 7"]
     start_index: Int[Array, "S N"]
     obj_mask: Bool[Array, "S O"]
@@ -151,6 +152,7 @@ class Params(NamedTuple):
     user_tremor: Float[Array, "*P S"]
     user_tremor_hz: Float[Array, "*P S"]
     user_seed: Int[Array, "*P S"]
+    user_aim_object: Bool[Array, "*P S"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:

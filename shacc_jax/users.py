@@ -8,7 +8,8 @@ imperfect user is stepped, one rollout per lane, as the step rule reads:
   k dt + phi) e, q_k the commanded position (q_0 the start), e a unit axis uniform on
   the sphere and phi uniform in [0, 2 pi), both drawn once per rollout;
 - each step the user looks at the gripper: d = c(p_k) - p_k, c the closest point of the
-  task's space; with probability ``user_lag`` (never the first step) the step repeats
+  task's space (``user_aim`` "space") or the task's aim point (``Geometry.aim_point``,
+  "object"); with probability ``user_lag`` (never the first step) the step repeats
   the previous step's displacement, else it is min(v_max dt, |d|) along d's direction
   turned by an angle |N(0, user_noise^2)| about an axis uniform on the circle across
   it (no step when |d| = 0); q_{k+1} = q_k + step;
@@ -21,9 +22,9 @@ position or mode, so a rollout draws the same numbers in every mode (modes compa
 pair by pair) and in every batch, piece or device it runs in.
 :func:`user_draws` gives them as arrays, which the tests' NumPy Automaton replays.
 
-A lane whose user is perfect (all three parameters zero) takes the closed form's
-sample positions, so it meets the same activation as the closed form; a batch whose
-users are all perfect is never stepped (``Layout.stepped_users``).
+A lane whose user is perfect (all three parameters zero, aiming at the space) takes
+the closed form's sample positions, so it meets the same activation as the closed
+form; a batch whose users are all perfect is never stepped (``Layout.stepped_users``).
 """
 
 from __future__ import annotations
@@ -160,7 +161,7 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
     step_length, tau, max_steps = n["step_length"], n["tau"], n["max_steps"]
     key = rollout_key(x.user_seed, g.scene_key, target, start)
     once = rollout_draws(key, dtype)
-    perfect = (x.user_noise <= 0) & (x.user_lag <= 0) & (x.user_tremor <= 0)
+    perfect = is_perfect(x)
     path = am.straight_path(spaces, target, p0, step_length, max_steps)
     own = jax.tree.map(lambda a: a[target], spaces)
     omega_dt = 2.0 * jnp.pi * x.user_tremor_hz * x.dt
@@ -193,7 +194,8 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
         return jnp.where(inside, quat.rotate_towards(r, goal, n["max_angle"]), r), inside
 
     def step(s: _State) -> _State:
-        d = shapes.prepared_project(own, s.p) - s.p
+        c = jnp.where(x.user_aim_object, g.aim_point[target], shapes.prepared_project(own, s.p))
+        d = c - s.p
         length = jnp.sqrt(jnp.dot(d, d))
         moving = length > 0
         u = d / jnp.where(moving, length, 1.0)
@@ -280,6 +282,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         S, N, T, *a.shape[2:]), out)
 
 
-def perfect(params: Params) -> Bool[Array, "..."]:
-    """Where the user is the perfect one (every user parameter zero)."""
-    return (params.user_noise <= 0) & (params.user_lag <= 0) & (params.user_tremor <= 0)
+def is_perfect(params: Params) -> Bool[Array, "..."]:
+    """Where the user is the perfect one: every user parameter zero, aiming at the
+    space."""
+    return ((params.user_noise <= 0) & (params.user_lag <= 0) & (params.user_tremor <= 0)
+            & ~params.user_aim_object)

@@ -230,13 +230,14 @@ class User:
     steps: tuple  # (n,), (n,), (n,)
     tremor_axis: np.ndarray
     tremor_phase: float
+    aim: np.ndarray | None = None  # the task's aim point (user_aim = object), else None
 
 
 def rollout(baked, scene: int, mode: str, start: int, target: int,
             user: User | None = None) -> Result:
     """One rollout from baked arrays (float64), SPEC section 9 step by step; with
     ``user``, the imperfect user of the model page's "Simulated users" (direction
-    noise, lag, tremor) instead of the perfect one."""
+    noise, lag, tremor, aiming at the object) instead of the perfect one."""
     T = int(baked.task_mask[scene].sum())
     which = "init" if mode == "baseline" else "opt"
 
@@ -282,7 +283,7 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
     sd, act = check(p)
     step = 0
     while act.size == 0 and step < max_steps:
-        c = active[target].project(p)
+        c = active[target].project(p) if user is None or user.aim is None else user.aim
         gap = np.linalg.norm(c - p)
         if user is not None and step > 0 and user.steps[2][step] < user.lag:
             move = last  # the previous step again

@@ -30,6 +30,8 @@ USERS = {
     "lag": {"user_lag": 0.3},
     "tremor": {"user_tremor": 0.01, "user_tremor_hz": 3.0},
     "all": {"user_noise": 0.2, "user_lag": 0.2, "user_tremor": 0.008},
+    "object": {"user_aim": "object"},
+    "object-noisy": {"user_aim": "object", "user_noise": 0.2},
 }
 
 
@@ -86,8 +88,9 @@ def _draws(baked, scene: int, n_steps: int):
 
 @pytest.mark.parametrize("name", list(USERS))
 def test_stepped_users_agree_with_the_reference(scenes, name):
-    """Each user parameter alone, and all together: every rollout of every mode equals
-    the NumPy Automaton's, stepped literally with the same random numbers (float64)."""
+    """Each user parameter alone, and all together, and a user aiming at the object
+    (alone and noisy): every rollout of every mode equals the NumPy Automaton's,
+    stepped literally with the same random numbers (float64)."""
     overrides = {"user_tremor_hz": 5.0, **USERS[name]}
     baked = _bake(scenes, overrides)
     with jax.enable_x64(True):
@@ -101,7 +104,9 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
                     user = User(overrides.get("user_noise", 0.0), overrides.get("user_lag", 0.0),
                                 overrides.get("user_tremor", 0.0), overrides["user_tremor_hz"],
                                 (steps.noise[n, t], steps.axis_angle[n, t], steps.lag[n, t]),
-                                once.tremor_axis[n, t], float(once.tremor_phase[n, t]))
+                                once.tremor_axis[n, t], float(once.tremor_phase[n, t]),
+                                baked.aim_point[s, t] if overrides.get("user_aim") == "object"
+                                else None)
                     for m, mode in enumerate(shacc_jax.MODES):
                         ref = rollout(baked, s, mode, n, t, user)
                         ro = ev.rollouts
@@ -183,8 +188,10 @@ def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
 
 def test_user_settings_have_ranges_and_no_collisions_yet():
     for name, bad in (("user_noise", 10.0), ("user_lag", 1.0), ("user_tremor", 1.0),
-                      ("user_tremor_hz", 0.0), ("user_noise", -0.1)):
+                      ("user_tremor_hz", 0.0), ("user_noise", -0.1), ("user_aim", "gaze")):
         with pytest.raises(InputError, match=name):
             DEFAULTS.with_overrides({name: bad})
     with pytest.raises(InputError, match=r"user_lag.*collision"):
         DEFAULTS.with_overrides({"collision": "mjx", "user_lag": 0.1})
+    with pytest.raises(InputError, match=r"user_aim.*collision"):
+        DEFAULTS.with_overrides({"collision": "mjx", "user_aim": "object"})
