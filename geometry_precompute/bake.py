@@ -88,6 +88,7 @@ class BakedScenes:
     user_tremor_hz: np.ndarray
     user_seed: np.ndarray
     user_aim_object: np.ndarray
+    activation_swept: np.ndarray
     q_mask: np.ndarray
     q_min: np.ndarray
     q_init: np.ndarray
@@ -312,6 +313,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params["collision"] = np.zeros(S, bool)
     params["user_seed"] = np.zeros(S, np.int32)
     params["user_aim_object"] = np.zeros(S, bool)
+    params["activation_swept"] = np.zeros(S, bool)
     out["scene_key"] = np.array([scene_key(r.scene) for r in results], np.int32)
     out["start_index"] = np.broadcast_to(np.arange(starts_arr.shape[1], dtype=np.int32),
                                          starts_arr.shape[:2]).copy()
@@ -361,6 +363,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
             params[k][si] = s[k]
         params["user_seed"][si] = s["seed"]
         params["user_aim_object"][si] = s["user_aim"] == "object"
+        params["activation_swept"][si] = s["activation_check"] == "swept"
     labels = {
         "names": [r.scene.name for r in results],
         "task_ids": [r.task_ids for r in results],

@@ -105,10 +105,12 @@ PARAMS = (
     Field("user_seed", ("S",), "int", "seed of the users' random numbers (the seed setting)"),
     Field("user_aim_object", ("S",), "bool", "user_aim = object: the user steers at the "
           "task's aim point, not at its space"),
+    Field("activation_swept", ("S",), "bool", "activation_check = swept: a step activates "
+          "where its segment first enters a space"),
 )
 
 # All zero (and user_aim_object False): the perfect user.
-USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object")
+USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object", "activation_swept")
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),

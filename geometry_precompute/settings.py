@@ -126,6 +126,8 @@ _SPECS: list[SettingSpec] = [
     _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True)),
     _spec("user_aim", "space", "choice", "rollout", _choice("space", "object"),
           ("space", "object")),
+    _spec("activation_check", "steps", "choice", "rollout", _choice("steps", "swept"),
+          ("steps", "swept")),
     # The gripper of collision = "mjx" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
@@ -195,6 +197,9 @@ _DOCS = {
     "user_tremor_hz": "simulated user: the tremor's frequency, Hz",
     "user_aim": "simulated user: steers at the closest point of its task's space, or at "
                 "the object (the template's aim point)",
+    "activation_check": "where activation is checked: at the step positions (steps, the "
+                        "paper's), or along each step's segment, at its first entry into a "
+                        "space (swept)",
     "gripper.finger_length": "collision gripper: finger capsule length, m",
     "gripper.finger_radius": "collision gripper: finger capsule radius, m",
     "gripper.opening": "collision gripper: distance between the finger axes, m",
@@ -427,11 +432,13 @@ class Settings(Mapping[str, Any]):
         if new["collision"] != "off":
             imperfect = [k for k in ("user_noise", "user_lag", "user_tremor") if new[k] > 0]
             imperfect += ["user_aim"] if new["user_aim"] != "space" else []
+            imperfect += ["activation_check"] if new["activation_check"] != "steps" else []
             if imperfect:
                 raise InputError(source, prefix + imperfect[0],
-                                 "a simulated user other than the perfect one is not checked "
-                                 "for collisions yet: set collision = off, or every user_* "
-                                 "setting to 0")
+                                 "a simulated user other than the perfect one (or a swept "
+                                 "activation check) is not checked for collisions yet: set "
+                                 "collision = off, or the user_* settings and "
+                                 "activation_check to their defaults")
         out = Settings.__new__(Settings)
         out._values = MappingProxyType(new)
         return out

@@ -153,6 +153,7 @@ class Params(NamedTuple):
     user_tremor_hz: Float[Array, "*P S"]
     user_seed: Int[Array, "*P S"]
     user_aim_object: Bool[Array, "*P S"]
+    activation_swept: Bool[Array, "*P S"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:

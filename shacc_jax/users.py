@@ -41,6 +41,10 @@ from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
 from .types import Geometry, Params
 
+# Sphere-tracing steps from a step's first interval entry to the entry into a space
+# (activation_check = swept).
+SPHERE_TRACING_STEPS = 16
+
 
 def rollout_key(seed: Int[Array, ""], scene_key: Int[Array, ""], task: Int[Array, ""],
                 start: Int[Array, ""]) -> Array:
@@ -209,12 +213,43 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
         # A perfect user's lane takes the closed form's samples (the same points).
         p = jnp.where(perfect, am.sample(path, k), q + shake(k))
         active, sd = check(p)
+        travelled = jnp.where(perfect, jnp.minimum(k * step_length, path.length),
+                              s.travelled + jnp.sqrt(jnp.dot(delta, delta)))
+        # activation_check = swept: the first point of the gripper's segment inside a
+        # space activates, where the segment first enters one.
+        seg = p - s.p
+        seg_len = jnp.sqrt(jnp.dot(seg, seg))
+        along = seg / jnp.where(seg_len > 0, seg_len, 1.0)
+        lo, hi = shapes.all_ray_intervals(spaces, s.p, along, n["grow"])
+        enters = g.task_mask & (lo <= hi) & (lo <= seg_len) & (hi >= 0) & (seg_len > 0)
+        # The intervals contain the spaces' tau-sublevel sets (a little more, near
+        # edges): from the first interval's start, sphere tracing (the sdf is
+        # 1-Lipschitz, so a step of min sdf - tau never passes an entry) reaches the
+        # first entry into any space.
+        t_hit = jnp.min(jnp.where(enters, jnp.maximum(lo, 0.0), inf))
+        t_hit = jnp.where(jnp.isfinite(t_hit), t_hit, 0.0)
+
+        def trace(_, t):
+            gap = jnp.min(jnp.where(g.task_mask, shapes.all_sdf(spaces, s.p + t * along), inf))
+            return t + jnp.maximum(gap - tau, 0.0)
+
+        t_hit = jax.lax.fori_loop(0, SPHERE_TRACING_STEPS, trace, t_hit)
+        p_hit = s.p + t_hit * along
+        sd_hit = jnp.where(g.task_mask, shapes.all_sdf(spaces, p_hit), inf)
+        # The entry point lies on the boundary of tau; rounding may put it a hair
+        # outside, which the closed form's interval slack covers.
+        act_hit = sd_hit <= n["grow"]
+        swept = (x.activation_swept & jnp.any(enters) & jnp.any(act_hit)
+                 & (t_hit <= seg_len))
+        p = jnp.where(swept, p_hit, p)
+        active = jnp.where(swept, act_hit, active)
+        sd = jnp.where(swept, sd_hit, sd)
+        travelled = jnp.where(swept, s.travelled + jnp.sqrt(jnp.dot(delta, delta))
+                              * (t_hit / jnp.where(seg_len > 0, seg_len, 1.0)), travelled)
         done = jnp.any(active)
         r, inside = turn(s.r, p)
         r = jnp.where(done, s.r, r)
         counted = inside & ~done
-        travelled = jnp.where(perfect, jnp.minimum(k * step_length, path.length),
-                              s.travelled + jnp.sqrt(jnp.dot(delta, delta)))
         return _State(k, q, p, delta, r, s.meta_steps + counted.astype(jnp.int32), travelled,
                       done, active, sd)
 
@@ -286,4 +321,4 @@ def is_perfect(params: Params) -> Bool[Array, "..."]:
     """Where the user is the perfect one: every user parameter zero, aiming at the
     space."""
     return ((params.user_noise <= 0) & (params.user_lag <= 0) & (params.user_tremor <= 0)
-            & ~params.user_aim_object)
+            & ~params.user_aim_object & ~params.activation_swept)

@@ -216,6 +216,40 @@ def turn_across(u, angle: float, axis_angle: float) -> np.ndarray:
     return Rotation.from_rotvec(angle * axis).apply(u)
 
 
+def first_entry(space: Space, a, b, tau: float) -> float | None:
+    """The first t in [0, 1] with sdf(a + t (b - a)) <= tau, None if there is none: the
+    signed distance to a convex space is convex along a segment, so a golden-section
+    search finds its minimum and a bisection the entry before it. Skipped when no
+    point of the segment can be that close (the distance is 1-Lipschitz)."""
+    def f(t):
+        return space.sdf(a + t * (b - a))
+
+    f0, f1, half = f(0.0), f(1.0), 0.5 * float(np.linalg.norm(b - a))
+    if f0 <= tau:
+        return 0.0
+    if min(f0, f1) - half > tau:
+        return None
+    lo, hi = 0.0, 1.0
+    for _ in range(80):
+        m1, m2 = lo + 0.381966 * (hi - lo), lo + 0.618034 * (hi - lo)
+        if f(m1) <= f(m2):
+            hi = m2
+        else:
+            lo = m1
+    t_min = 0.5 * (lo + hi)
+    if min(f(t_min), f1) > tau:
+        return None
+    end = t_min if f(t_min) <= tau else 1.0
+    lo, hi = 0.0, end
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if f(mid) <= tau:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
 @dataclass
 class User:
     """A simulated user (the user_* settings) with its random numbers, given as arrays
@@ -234,10 +268,12 @@ class User:
 
 
 def rollout(baked, scene: int, mode: str, start: int, target: int,
-            user: User | None = None) -> Result:
+            user: User | None = None, swept: bool = False) -> Result:
     """One rollout from baked arrays (float64), SPEC section 9 step by step; with
     ``user``, the imperfect user of the model page's "Simulated users" (direction
-    noise, lag, tremor, aiming at the object) instead of the perfect one."""
+    noise, lag, tremor, aiming at the object) instead of the perfect one; with
+    ``swept``, activation where the gripper's segment of a step first enters a space
+    (the path length up to there, in proportion)."""
     T = int(baked.task_mask[scene].sum())
     which = "init" if mode == "baseline" else "opt"
 
@@ -297,11 +333,20 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
         step += 1
         q = q + move
         last = move
-        p = gripper(step)
+        before, p = p, gripper(step)
         travelled += float(np.linalg.norm(move))
         if collider is not None and collider.penetrates(p, r):
             return collided(step)
         sd, act = check(p)
+        if swept:
+            entries = [t for t in (first_entry(s, before, p, tau) for s in active)
+                       if t is not None]
+            if entries:
+                t_hit = min(entries)
+                travelled -= (1.0 - t_hit) * float(np.linalg.norm(move))
+                p = before + t_hit * (p - before)
+                sd = np.array([s.sdf(p) for s in active])
+                act = np.flatnonzero(sd <= tau + 1e-9)
         if act.size:
             break
         if mode == "shacc":

@@ -25,7 +25,8 @@ def test_every_spec_name_present():
              "drawer_pull.depth_min", "optimize_starts", "optimize_seed",
              "optimize_population", "optimize_generations", "optimize_validation_starts",
              "optimize_validation_seed", "optimize_candidates", "optimize_selection",
-             "user_noise", "user_lag", "user_tremor", "user_tremor_hz", "user_aim"}
+             "user_noise", "user_lag", "user_tremor", "user_tremor_hz", "user_aim",
+             "activation_check"}
     assert set(SPECS) == names
     assert DEFAULTS["dt"] == 0.02 and DEFAULTS["start_grid"] == (6, 6)
     assert (DEFAULTS["optimize_starts"], DEFAULTS["optimize_seed"],
