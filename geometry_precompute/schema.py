@@ -186,7 +186,9 @@ class Layout:
     ``collision`` param is on; scenes with it off are not checked). ``stepped_users``:
     whether some scene's simulated user is not the perfect one (a :data:`USER` param
     above zero): the program then steps every rollout (``shacc_jax.users``) instead of
-    the perfect user's closed form. ``box_objects``:
+    the perfect user's closed form. ``swept_checks``: whether some scene checks
+    activation along each step's segment (``activation_check`` swept): only then does
+    the stepped program trace that check. ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
@@ -201,6 +203,7 @@ class Layout:
     collision_checks: bool = False
     box_objects: bool = False
     stepped_users: bool = False
+    swept_checks: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
 
@@ -241,5 +244,6 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
         n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
         meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
         collision_checks=collide, box_objects=boxes, stepped_users=stepped,
+        swept_checks=bool(np.asarray(arrays.activation_swept).any()),
         lanes_per_block=lanes_per_block,
         samples_per_block=samples_per_block)

@@ -271,7 +271,8 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
         jax.default_backend(), stepped_users=True)
     return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
-                               mode == "shacc", layout.meta_formula, lanes_per_block)
+                               mode == "shacc", layout.meta_formula, lanes_per_block,
+                               layout.swept_checks)
             for mode in layout.modes]
 
 

@@ -158,8 +158,9 @@ class _State(NamedTuple):
 
 def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str,
              p0: Float[Array, "3"], r0: Float[Array, "4"], target: Int[Array, ""],
-             start: Int[Array, ""], track: bool):
-    """One stepped rollout: (Outcome, R at the end, steps in a meta region)."""
+             start: Int[Array, ""], track: bool, swept_checks: bool):
+    """One stepped rollout: (Outcome, R at the end, steps in a meta region). The swept
+    activation check is traced only where ``swept_checks`` (some scene asks for it)."""
     dtype = p0.dtype
     n = am.rollout_numbers(x, dtype)
     step_length, tau, max_steps = n["step_length"], n["tau"], n["max_steps"]
@@ -197,26 +198,9 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
             goal = jnp.where(g.yaw_meta, goals[0], goals[1])
         return jnp.where(inside, quat.rotate_towards(r, goal, n["max_angle"]), r), inside
 
-    def step(s: _State) -> _State:
-        c = jnp.where(x.user_aim_object, g.aim_point[target], shapes.prepared_project(own, s.p))
-        d = c - s.p
-        length = jnp.sqrt(jnp.dot(d, d))
-        moving = length > 0
-        u = d / jnp.where(moving, length, 1.0)
-        draw = step_draws(key, s.k.astype(jnp.int32), dtype)
-        turned = turn_across(u, x.user_noise * draw.noise, draw.axis_angle)
-        fresh = jnp.where(moving, jnp.minimum(step_length, length) * turned, 0.0)
-        lagging = (s.k > 0) & (draw.lag < x.user_lag)
-        delta = jnp.where(lagging, s.last, fresh)
-        k = s.k + 1.0
-        q = s.q + delta
-        # A perfect user's lane takes the closed form's samples (the same points).
-        p = jnp.where(perfect, am.sample(path, k), q + shake(k))
-        active, sd = check(p)
-        travelled = jnp.where(perfect, jnp.minimum(k * step_length, path.length),
-                              s.travelled + jnp.sqrt(jnp.dot(delta, delta)))
-        # activation_check = swept: the first point of the gripper's segment inside a
-        # space activates, where the segment first enters one.
+    def swept_entry(s: _State, p, active, sd, delta, travelled):
+        """activation_check = swept: where the gripper's segment from s.p to p first
+        enters a space, that point activates (for the lanes that ask for it)."""
         seg = p - s.p
         seg_len = jnp.sqrt(jnp.dot(seg, seg))
         along = seg / jnp.where(seg_len > 0, seg_len, 1.0)
@@ -246,6 +230,28 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
         sd = jnp.where(swept, sd_hit, sd)
         travelled = jnp.where(swept, s.travelled + jnp.sqrt(jnp.dot(delta, delta))
                               * (t_hit / jnp.where(seg_len > 0, seg_len, 1.0)), travelled)
+        return p, active, sd, travelled
+
+    def step(s: _State) -> _State:
+        c = jnp.where(x.user_aim_object, g.aim_point[target], shapes.prepared_project(own, s.p))
+        d = c - s.p
+        length = jnp.sqrt(jnp.dot(d, d))
+        moving = length > 0
+        u = d / jnp.where(moving, length, 1.0)
+        draw = step_draws(key, s.k.astype(jnp.int32), dtype)
+        turned = turn_across(u, x.user_noise * draw.noise, draw.axis_angle)
+        fresh = jnp.where(moving, jnp.minimum(step_length, length) * turned, 0.0)
+        lagging = (s.k > 0) & (draw.lag < x.user_lag)
+        delta = jnp.where(lagging, s.last, fresh)
+        k = s.k + 1.0
+        q = s.q + delta
+        # A perfect user's lane takes the closed form's samples (the same points).
+        p = jnp.where(perfect, am.sample(path, k), q + shake(k))
+        active, sd = check(p)
+        travelled = jnp.where(perfect, jnp.minimum(k * step_length, path.length),
+                              s.travelled + jnp.sqrt(jnp.dot(delta, delta)))
+        if swept_checks:
+            p, active, sd, travelled = swept_entry(s, p, active, sd, delta, travelled)
         done = jnp.any(active)
         r, inside = turn(s.r, p)
         r = jnp.where(done, s.r, r)
@@ -269,7 +275,8 @@ def _rollout(g: Geometry, x: Params, spaces: shapes.Prepared, meta, formula: str
 
 
 def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
-                 formula: str, lanes_per_block: int) -> tuple[am.Outcome, Array, Array]:
+                 formula: str, lanes_per_block: int,
+                 swept_checks: bool = False) -> tuple[am.Outcome, Array, Array]:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
     T, 4) and the meta steps (S, N, T). ``which``: the mode's spaces (``init`` or
     ``opt``); ``track``: with the meta skill; ``formula``: ``Layout.meta_formula``.
@@ -309,7 +316,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         pose = geometry.starts[s, n]
         return _rollout(g, x, jax.tree.map(pick, spaces),
                         None if meta is None else jax.tree.map(pick, meta), formula,
-                        pose[:3], pose[3:], t, geometry.start_index[s, n], track)
+                        pose[:3], pose[3:], t, geometry.start_index[s, n], track,
+                        swept_checks)
 
     out = jax.lax.map(jax.vmap(one), order.reshape(n_blocks, B))
     inverse = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))

@@ -257,7 +257,8 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
     # When each phase ended, in seconds since the start (the client's wall clock).
     phases = {"config": time.perf_counter() - t0}
     # A local cluster's evaluation workers start the warm-up with their processes.
-    with connect(scheduler, workers, warm_up=warm_up_job(cfg, todo, files)) as pool:
+    first = warm_up_job(cfg, todo, files)
+    with connect(scheduler, workers, warm_up=first) as pool:
         phases["cluster"] = time.perf_counter() - t0
         if progress and pool.dashboard:
             print(f"Dask dashboard: {pool.dashboard}", file=sys.stderr)
@@ -266,7 +267,8 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
             if scheduler else contextlib.nullcontext()
         try:
             with watch:
-                counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead)
+                counts = _stream(cfg, out, todo, files, pool, cache, progress, lookahead,
+                                 first)
         except Exception as e:
             if not lost_scheduler(pool.client, e):
                 raise
@@ -300,7 +302,7 @@ def warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
 
 
 def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
-            progress: bool, lookahead: int) -> dict:
+            progress: bool, lookahead: int, first: tuple) -> dict:
     """Submit the chunks of ``todo`` with a bounded number in flight, and write each as its
     evaluation comes back. Returns the counts and busy times for the summary."""
     from distributed import as_completed
@@ -376,7 +378,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
         """Each evaluation worker compiles (or loads) the first chunk's program while the
         scenes are being precomputed (a local cluster's workers began it with their
         processes: the task then waits for that warm-up to end)."""
-        job, ref = warm_up_job(cfg, todo, files)
+        job, ref = first
         # One per evaluation worker: each takes one, holding its single evaluate slot.
         # (Not pinned with workers=[...]: distributed 2026.8's scheduler fails with a
         # KeyError when a pinned task with resources is moved off a dead worker.)
