@@ -120,6 +120,10 @@ def cmd_run(args) -> None:
     modes = tuple(args.modes)
     rows = []
     dev = jax.devices()[0]
+    if args.stepping:  # tuning: the stepped kernel's scheme on this backend
+        from shacc_jax import users
+
+        users.STEPPING[jax.default_backend()] = tuple(args.stepping)
     if args.devices:
         return _run_devices(args, modes)
     for n in args.sizes:
@@ -149,13 +153,51 @@ def cmd_run(args) -> None:
                    jax.default_backend(), layout.collision_checks, layout.stepped_users),
                "chunk": layout.samples_per_block, "collision": args.collision,
                "user": args.user, "stepped": layout.stepped_users,
-               "meta": layout.meta_formula,
+               "meta": layout.meta_formula, "stepping": args.stepping,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
         rows.append(row)
         print(json.dumps(row), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def cmd_kernels(args) -> None:
+    """Count the device kernels one compiled evaluation launches: a JAX profiler trace
+    (Perfetto JSON) of one call after a warm-up; the events on the device's streams,
+    their summed duration against the call's wall time (how busy the device was)."""
+    import gzip
+    import tempfile
+
+    import jax
+
+    import shacc_jax
+
+    geometry, params, layout = _load(args.bake, args.scenes, modes=tuple(args.modes),
+                                     block=args.block, user=args.user)
+    compiled = shacc_jax.evaluate.lower(geometry, params, layout).compile()
+    jax.block_until_ready(compiled(geometry, params))
+    with tempfile.TemporaryDirectory() as folder:
+        t = time.perf_counter()
+        with jax.profiler.trace(folder, create_perfetto_trace=True):
+            jax.block_until_ready(compiled(geometry, params))
+        wall = time.perf_counter() - t
+        [trace] = Path(folder).rglob("*.trace.json.gz")
+        events = json.loads(gzip.decompress(trace.read_bytes()))["traceEvents"]
+    device = {e["pid"] for e in events if e.get("ph") == "M" and e.get("name") == "process_name"
+              and str(e.get("args", {}).get("name", "")).startswith("/device:")}
+    spans = [e for e in events if e.get("ph") == "X" and e.get("pid") in device]
+    kernels = [e for e in spans if not str(e.get("name", "")).lower().startswith("mem")]
+    busy = sum(float(e.get("dur", 0)) for e in kernels) * 1e-6
+    names: dict[str, int] = {}
+    for e in kernels:
+        names[e["name"]] = names.get(e["name"], 0) + 1
+    row = {"device": str(jax.devices()[0]), "scenes": args.scenes, "user": args.user,
+           "stepped": layout.stepped_users, "block": args.block, "wall_s": wall,
+           "kernels": len(kernels), "copies_and_sets": len(spans) - len(kernels),
+           "kernel_busy_s": busy, "mean_kernel_us": 1e6 * busy / max(len(kernels), 1),
+           "top": sorted(names.items(), key=lambda kv: -kv[1])[:8]}
+    print(json.dumps(row), flush=True)
 
 
 def cmd_points(args) -> None:
@@ -268,8 +310,18 @@ def main() -> None:
                    help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
                    help="an imperfect simulated user in every scene (stepped rollouts)")
+    r.add_argument("--stepping", type=int, nargs=2, metavar=("SHARE", "UNROLL"),
+                   help="stepped users: check 1/SHARE of the lanes in full per step, "
+                   "UNROLL steps per loop iteration (users.STEPPING)")
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
+    k = sub.add_parser("kernels", help="count the device kernels of one evaluation")
+    k.add_argument("--bake", required=True)
+    k.add_argument("--scenes", type=int, default=10000)
+    k.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
+    k.add_argument("--block", type=int, default=None)
+    k.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"))
+    k.set_defaults(func=cmd_kernels)
     q = sub.add_parser("points")
     q.add_argument("--bake", required=True)
     q.add_argument("--scenes", type=int, default=1000)

@@ -157,18 +157,18 @@ def lanes_per_block_default(backend: str, collision_checks: bool = False,
     accelerator's takes half as many lanes (measured on an H100, a quarter, half and
     all of them: 0.63, 0.59, 0.72 s for 10 000 scenes; benchmarks/RESULTS.md); a CPU's
     keeps all of them (fewer, fuller rounds of the exact search). Stepped users
-    (``shacc_jax.users``) step a block until its slowest lane ends: larger blocks, as
-    each step's operations cost the CPU a fixed overhead per block (4096 lanes: 30 s
-    for 216 000 rollouts on 2 cores, against 76 s with 256 and 36 s with 16 384).
+    (``shacc_jax.users``): the number of slots the stepping loop keeps busy (measured,
+    54 000 rollouts on 2 CPU cores: 8192 slots 1.94 s, 4096 2.12 s; 10.8 M on an H100:
+    2^19 slots 1.62 s, 2^18 1.81 s, 2^20 1.73 s).
 
     >>> lanes_per_block_default("gpu"), lanes_per_block_default("gpu", True)
     (131072, 65536)
     >>> lanes_per_block_default("cpu", True), lanes_per_block_default("cpu", stepped_users=True)
-    (256, 4096)
+    (256, 8192)
     """
     accelerator = backend in ("gpu", "cuda", "rocm", "tpu")
     if stepped_users:
-        return 1 << 20 if accelerator else 1 << 12
+        return 1 << 19 if accelerator else 1 << 13
     if accelerator:
         return 1 << 16 if collision_checks else 1 << 17
     return 1 << 8

@@ -39,11 +39,13 @@ MIN_DISTANCE = 1e-6
 
 def meta_target_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array, cluster: Array,
                       orient_kind: Array, orient_quat: Array, axis: Array, p: Array,
-                      tau: Array) -> tuple[Array, Array]:
+                      tau: Array, sd: tuple[Array, Array] | None = None
+                      ) -> tuple[Array, Array]:
     """(p is in a meta region, R_M(p) of that region's cluster), the Markley average, in
     the layout of :func:`meta_target_yaw_batch` (orient_quat (4, T, *batch)): returns
-    (inside (*batch), R_M (4, *batch))."""
-    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
+    (inside (*batch), R_M (4, *batch)). ``sd``: the sdfs of ``init`` and ``opt`` at p
+    where the caller has them already."""
+    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau, sd)
     qs = task_orientation(orient_kind, orient_quat, axis, p)  # (4, T, *batch)
     return inside, quat.markley_average_batch(qs, normalised(w))
 
@@ -59,14 +61,16 @@ def normalised(w: Array) -> Array:
     return w / jnp.maximum(jnp.sum(w, axis=0, keepdims=True), jnp.finfo(w.dtype).tiny)
 
 
-def _region_and_weights(init, opt, mask, cluster, p, tau) -> tuple[Array, Array]:
+def _region_and_weights(init, opt, mask, cluster, p, tau, sd=None) -> tuple[Array, Array]:
     """(p is in a meta region (*batch), the unnormalised weights 1 / d_i^2 of the
-    chosen cluster's members (T, *batch)), in the batch layout."""
+    chosen cluster's members (T, *batch)), in the batch layout; ``sd``: (sdf^init,
+    sdf^opt) at p, computed here where None."""
     member = mask & (cluster >= 0)
-    sd = shapes.prepared_sdf(init, p)
-    inside = member & (sd <= tau)
-    chosen = _chosen_cluster(inside, sd, cluster)
-    w = inverse_square_weights(shapes.prepared_sdf(opt, p), member & (cluster == chosen))
+    sd_init, sd_opt = sd if sd is not None else (shapes.prepared_sdf(init, p),
+                                                 shapes.prepared_sdf(opt, p))
+    inside = member & (sd_init <= tau)
+    chosen = _chosen_cluster(inside, sd_init, cluster)
+    w = inverse_square_weights(sd_opt, member & (cluster == chosen))
     return jnp.any(inside, axis=0), w
 
 
@@ -94,7 +98,8 @@ def yaw_directions(orient_quat: Float[Array, "T 4"]
 
 def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Array,
                           cluster: Array, orient_kind: Array, fixed_dir: Array, axis: Array,
-                          p: Array, tau: Array) -> tuple[Array, Array]:
+                          p: Array, tau: Array, sd: tuple[Array, Array] | None = None
+                          ) -> tuple[Array, Array]:
     """R_M for scenes whose cluster members all have horizontal approach frames
     (``Geometry.yaw_meta``): the closed form of the module docstring, no eigenvector
     iteration (tested equal to the Markley average in tests/test_quaternion.py). On
@@ -104,9 +109,9 @@ def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Arr
     work. Returns (inside (*batch), R_M (4, *batch)). The task reductions run over a
     leading axis, so each is a few elementwise operations on whole batch arrays;
     written per point and vmapped, the reductions over a trailing axis of T took most
-    of the time on CPU."""
+    of the time on CPU. ``sd``: as for :func:`meta_target_batch`."""
     # The weights' normalisation does not change the direction of the sum.
-    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau)
+    inside, w = _region_and_weights(init, opt, mask, cluster, p, tau, sd)
     ux, uy = task_direction(orient_kind, fixed_dir, axis, p)
     ax, ay = jnp.sum(w * ux, axis=0), jnp.sum(w * uy, axis=0)
     n = jnp.sqrt(ax * ax + ay * ay)

@@ -68,7 +68,7 @@ def test_the_perfect_user_stepped_is_the_closed_form(scenes):
     and delta_R agree to float32 rounding."""
     baked = bake(scenes)
     closed = _evaluate(baked)
-    stepped = _evaluate(baked, stepped_users=True)
+    stepped = _evaluate(baked, stepped_users=True, lanes_per_block=40)
     real = closed.rollouts.outcome != shacc_jax.types.INVALID
     assert real.sum() == 3 * 6 * sum(len(r.spaces) for r in scenes)
     for name in ("outcome", "activated", "step", "point", "path_length", "meta_steps"):
@@ -97,7 +97,8 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
     overrides = {"user_tremor_hz": 5.0, **USERS[name]}
     baked = _bake(scenes, overrides)
     with jax.enable_x64(True):
-        ev = _evaluate(baked, x64=True)
+        # Blocks of 40 lanes: slots end and take new lanes many times.
+        ev = _evaluate(baked, x64=True, lanes_per_block=40)
         assert shacc_jax.inputs(baked)[2].stepped_users
         checked = 0
         for s, r in enumerate(scenes):
@@ -128,6 +129,25 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
     perfect = _evaluate(bake(scenes), x64=False)
     assert (perfect.rollouts.step != ev.rollouts.step).any() or \
         not np.allclose(perfect.rollouts.point, ev.rollouts.point, equal_nan=True)
+
+
+def test_the_accelerators_stepping_gives_the_same_rollouts(scenes, monkeypatch):
+    """The accelerators step differently (every lane checked in full each step, four
+    steps per loop iteration, users.STEPPING); run here on the CPU, their rollouts
+    equal the CPU's scheme (a share of lanes gathered and checked, one step per
+    iteration) bit for bit, in every mode, on a batch that mixes perfect users with
+    imperfect ones under the swept check."""
+    users_per_scene = [{}, USERS["swept-all"], {}, USERS["all"]]
+    baked = bake([replace(r, settings=r.settings.with_overrides(o))
+                  for r, o in zip(scenes, users_per_scene, strict=True)])
+    ours = _evaluate(baked, stepped_users=True, lanes_per_block=64)
+    monkeypatch.setitem(users.STEPPING, "cpu", users.STEPPING["accelerator"])
+    jax.clear_caches()  # the stepping is read while tracing
+    theirs = _evaluate(baked, stepped_users=True, lanes_per_block=64)
+    jax.clear_caches()
+    for field in ours.rollouts._fields:
+        a, b = getattr(ours.rollouts, field), getattr(theirs.rollouts, field)
+        assert np.array_equal(a, b, equal_nan=True), field
 
 
 def test_swept_activation_does_not_depend_on_the_speed(scenes):
