@@ -219,9 +219,6 @@ class Layout:
         for name in ("n_tasks", "n_starts", "n_objects", "samples_per_block"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"Layout.{name} must be >= 1, got {getattr(self, name)}")
-        if self.collision_checks and self.stepped_users:
-            raise ValueError("Layout: collision checks are not available with an imperfect "
-                             "simulated user (stepped_users) yet")
         if self.lanes_per_block is not None and int(self.lanes_per_block) < 1:
             raise ValueError(f"Layout.lanes_per_block must be >= 1 or None, got "
                              f"{self.lanes_per_block}")

@@ -63,7 +63,7 @@ def scene_objects(obj_kind, obj_center, obj_quat, obj_size, obj_mask):
     return obj_kind, obj_center, jax.vmap(quat.to_matrix)(obj_quat), obj_size, obj_mask
 
 
-def _point_distance(x, kind, size):
+def point_distance(x, kind, size):
     """Euclidean distance from points x ((x, y, z) tuple of arrays), in an object's frame,
     to the solid cylinder or box (``size`` likewise a tuple; 0 inside). Elementwise
     only, so that many evaluations fuse into one kernel."""
@@ -87,7 +87,7 @@ def segment_distance(a, d, kind, size):
     bracket to memory; a grid step's points are independent and fuse into one kernel.
     Faster on the H100 and on the CPU: benchmarks/RESULTS.md.)"""
     def f(t):
-        return _point_distance(tuple(a[..., i] + t * d[..., i] for i in range(3)), kind,
+        return point_distance(tuple(a[..., i] + t * d[..., i] for i in range(3)), kind,
                                tuple(size[..., i] for i in range(3)))
 
     return _grid_minimum(f, jnp.zeros(a.shape[:-1], a.dtype))
@@ -284,9 +284,9 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
         thr = radius - PENETRATION_EPS
         # 1e-6 m of slack: the bound's rounding must not clear a pair the search finds.
         maybe.append(near & (_lower_bound_xyz(a, d, o_kind, o_size) < thr + 1e-6))
-        upper = _point_distance(a, o_kind, o_size)
+        upper = point_distance(a, o_kind, o_size)
         for t in (0.5, 1.0):
-            upper = jnp.minimum(upper, _point_distance(
+            upper = jnp.minimum(upper, point_distance(
                 tuple(ai + t * di for ai, di in zip(a, d, strict=True)), o_kind, o_size))
         sure = sure | jnp.any(near & (upper < thr), axis=2)
     first_sure = jnp.where(jnp.any(sure, axis=1), jnp.argmax(sure, axis=1), W)

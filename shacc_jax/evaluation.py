@@ -272,7 +272,8 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
         jax.default_backend(), stepped_users=True)
     return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
                                mode == "shacc", layout.meta_formula, lanes_per_block,
-                               layout.swept_checks, jax.default_backend())
+                               layout.swept_checks, jax.default_backend(),
+                               layout.collision_checks)
             for mode in layout.modes]
 
 

@@ -38,10 +38,11 @@ from jax.extend.random import threefry_2x32
 from jaxtyping import Array, Bool, Float, Int
 
 from . import automaton as am
+from . import collision as col
 from . import quaternion as quat
 from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
-from .types import Geometry, Params
+from .types import COLLISION, Geometry, Params
 
 # Sphere-tracing steps from a step's first interval entry to the entry into a space
 # (activation_check = swept).
@@ -206,12 +207,14 @@ class _Move(NamedTuple):
 
 class _Check(NamedTuple):
     """A full check's answers at the gripper: its position (the entry point under the
-    swept check), the path length, activated, the active set and sdfs, R after the meta
-    skill's turn, whether the step counts as a meta step, the clearance."""
+    swept check), the path length, ended (activated or collided), collided, the active
+    set and sdfs, R after the meta skill's turn, whether the step counts as a meta step,
+    the clearance."""
 
     p: Array
     travelled: Array
     done: Array
+    hit: Array
     active: Array
     sd: Array
     r: Array
@@ -227,7 +230,8 @@ class _State(NamedTuple):
     r: Array          # orientation (4,)
     meta_steps: Array
     travelled: Array  # path length of the commanded position, m
-    done: Array       # activated
+    done: Array       # activated or collided
+    hit: Array        # collided
     active: Array     # (T,) the active set at the last full check
     sd: Array         # (T,) the sdfs there
     clear: Array      # the clearance found there
@@ -271,11 +275,15 @@ def _move(lane: _Lane, s: _State) -> _Move:
 
 
 def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r: Array,
-           track: bool, formula: str, swept_checks: bool, step=None) -> _Check:
+           track: bool, formula: str, swept_checks: bool, collide: bool,
+           step=None) -> _Check:
     """The full check at the gripper position p (one lane): every space's sdf and the
     activation; with ``step`` (the state before and the move), the swept check's entry
-    point (traced only where ``swept_checks``) and the meta skill's turn of R. ``g``,
-    ``spaces``, ``meta``: the lane's scene."""
+    point (traced only where ``swept_checks``) and the meta skill's turn of R. With
+    ``collide`` (traced only where some scene checks collisions), the gripper's
+    capsules at (p, R before the turn) against the objects first: a penetration ends
+    the rollout as a collision, without activating or turning. ``g``, ``spaces``,
+    ``meta``: the lane's scene."""
     x, dtype = lane.x, p.dtype
     n = _numbers(x, dtype)
     tau = n["tau"]
@@ -290,8 +298,22 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
     if step is not None and swept_checks:
         p, active, sd, travelled = _swept_entry(spaces, g.task_mask, lane, step[0], step[1],
                                                 p, active, sd, n)
-    done = jnp.any(active)
     clear = jnp.min(sd)
+    hit = jnp.zeros((), bool)
+    if collide:
+        objects = col.scene_objects(g.obj_kind, g.obj_center, g.obj_quat, g.obj_size,
+                                    g.obj_mask)
+        dims = x.gripper()
+        hit = x.collision & col.penetrates(objects, p, r, dims)
+        active = active & ~hit
+        # No capsule reaches beyond gripper_reach from p: objects farther than that
+        # cannot be touched, a bound as 1-Lipschitz as the spaces' sdfs.
+        kind, centre, mat, size, mask = objects
+        local = jnp.einsum("oji,oj->oi", mat, p[None, :] - centre)
+        apart = col.point_distance(tuple(local.T), kind, tuple(size.T))
+        gap = jnp.min(jnp.where(mask, apart, inf)) - col.gripper_reach(dims)
+        clear = jnp.where(x.collision, jnp.minimum(clear, gap + tau), clear)
+    done = jnp.any(active) | hit
     counted = jnp.zeros((), bool)
     if track:
         init, opt, fixed_dir = meta
@@ -316,7 +338,7 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
             turned = jnp.where(inside, quat.rotate_towards(r, goal, n["max_angle"]), r)
             r = jnp.where(done, r, turned)
             counted = inside & ~done
-    return _Check(p, travelled, done, active, sd, r, counted, clear)
+    return _Check(p, travelled, done, hit, active, sd, r, counted, clear)
 
 
 def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, n):
@@ -397,7 +419,8 @@ class _Pass(NamedTuple):
 
 def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                  formula: str, lanes_per_block: int, swept_checks: bool = False,
-                 backend: str = "cpu") -> tuple[am.Outcome, Array, Array]:
+                 backend: str = "cpu", collision_checks: bool = False
+                 ) -> tuple[am.Outcome, Array, Array]:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
     T, 4) and the meta steps (S, N, T). ``which``: the mode's spaces (``init`` or
     ``opt``); ``track``: with the meta skill; ``formula``: ``Layout.meta_formula``.
@@ -446,7 +469,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                 None if meta is None else jax.tree.map(pick, meta))
 
     def check(ln, p, r, step=None):
-        return _check(*scene_of(ln.scene), ln, p, r, track, formula, swept_checks, step)
+        return _check(*scene_of(ln.scene), ln, p, r, track, formula, swept_checks,
+                      collision_checks, step)
 
     def begin(ids, occupied):
         """The lanes ``ids`` and their states before the first step (checked at the
@@ -459,12 +483,14 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         zero = jnp.zeros(n, dtype)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
         return lane, _State(zero, lane.p0, first.p, jnp.zeros((3, n), dtype), lane.r0,
-                            jnp.zeros(n, jnp.int32), zero, first.done, first.active,
-                            first.sd, first.clear, zero, live)
+                            jnp.zeros(n, jnp.int32), zero, first.done, first.hit,
+                            first.active, first.sd, first.clear, zero, live)
 
     def finish(ln, e):
         act = am.Activation(jnp.where(e.done, e.k, jnp.inf), e.active, e.sd)
         code, activated = am.outcome_codes(act, ln.target, ln.x.ambiguity_nearest)
+        code = jnp.where(e.hit, COLLISION, code)
+        activated = jnp.where(e.hit, -1, activated)
         k = jnp.where(e.done, e.k, ln.x.max_steps.astype(dtype))
         return _Result(code, activated, k.astype(jnp.int32), e.p, e.travelled, e.r,
                        e.meta_steps)
@@ -509,7 +535,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                    adv(m.delta, s.last), put(s.r, c.r),
                    put(s.meta_steps, sub_s.meta_steps + c.counted.astype(jnp.int32)),
                    adv(put(m.travelled, c.travelled), s.travelled),
-                   put(s.done, c.done), put(s.active, c.active), put(s.sd, c.sd),
+                   put(s.done, c.done), put(s.hit, c.hit), put(s.active, c.active),
+                   put(s.sd, c.sd),
                    put(s.clear, c.clear), adv(put(m.moved, jnp.zeros_like(c.clear)), s.moved),
                    s.live)
         steps = lane.x.max_steps.astype(dtype)

@@ -35,6 +35,9 @@ USERS = {
     "swept": {"activation_check": "swept"},
     "swept-all": {"activation_check": "swept", "user_noise": 0.2, "user_lag": 0.2,
                   "user_tremor": 0.008},
+    "collision-all": {"collision": "mjx", "user_noise": 0.2, "user_lag": 0.2,
+                      "user_tremor": 0.008},
+    "collision-object": {"collision": "mjx", "user_aim": "object", "user_noise": 0.2},
 }
 
 
@@ -125,6 +128,8 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
                         assert (np.isnan(dr) and np.isnan(ref_dr)) or abs(dr - ref_dr) < 1e-6
                         checked += 1
     assert checked == 3 * 6 * sum(len(r.spaces) for r in scenes)
+    if "collision" in overrides:  # the scenes do make this user collide
+        assert (ev.rollouts.outcome == shacc_jax.types.COLLISION).any()
     # The user changed something: not every rollout is the perfect user's.
     perfect = _evaluate(bake(scenes), x64=False)
     assert (perfect.rollouts.step != ev.rollouts.step).any() or \
@@ -237,15 +242,27 @@ def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
         assert np.array_equal(ev.rollouts.point[i, 0], ev.rollouts.point[i, 1])
 
 
-def test_user_settings_have_ranges_and_no_collisions_yet():
+def test_the_perfect_user_stepped_with_collision_checks_is_the_closed_form(scenes):
+    """With collision checks on, a perfect user's stepped lanes collide where, and only
+    where, the closed form's lane pass finds a penetration: the same outcomes, steps,
+    points and meta steps in every mode."""
+    baked = _bake(scenes, {"collision": "mjx"})
+    closed = _evaluate(baked)
+    stepped = _evaluate(baked, stepped_users=True, lanes_per_block=40)
+    real = closed.rollouts.outcome != shacc_jax.types.INVALID
+    assert (closed.rollouts.outcome == shacc_jax.types.COLLISION).any()
+    for name in ("outcome", "activated", "step", "point", "path_length", "meta_steps"):
+        a, b = getattr(closed.rollouts, name), getattr(stepped.rollouts, name)
+        assert np.array_equal(a[real], b[real]), name
+
+
+def test_user_settings_have_ranges():
     for name, bad in (("user_noise", 10.0), ("user_lag", 1.0), ("user_tremor", 1.0),
                       ("user_tremor_hz", 0.0), ("user_noise", -0.1), ("user_aim", "gaze"),
                       ("activation_check", "both")):
         with pytest.raises(InputError, match=name):
             DEFAULTS.with_overrides({name: bad})
-    with pytest.raises(InputError, match=r"user_lag.*collision"):
-        DEFAULTS.with_overrides({"collision": "mjx", "user_lag": 0.1})
-    with pytest.raises(InputError, match=r"user_aim.*collision"):
-        DEFAULTS.with_overrides({"collision": "mjx", "user_aim": "object"})
+    # Imperfect users are checked for collisions; the swept check is not.
+    DEFAULTS.with_overrides({"collision": "mjx", "user_lag": 0.1, "user_aim": "object"})
     with pytest.raises(InputError, match=r"activation_check.*collision"):
         DEFAULTS.with_overrides({"collision": "mjx", "activation_check": "swept"})
