@@ -18,8 +18,9 @@ MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c"
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
 
 __all__ = ["MODE_COLORS", "OUTCOME_COLORS", "category_bars", "correlation_panels",
-           "scene_gallery", "scene_top_view", "space_shadows_yz", "success_fields",
-           "success_fields_with_spaces", "sweep_heatmap", "sweep_lines", "swept_axes"]
+           "robustness_lines", "scene_gallery", "scene_top_view", "space_shadows_yz",
+           "success_fields", "success_fields_with_spaces", "sweep_heatmap", "sweep_lines",
+           "swept_axes"]
 
 
 def _figure(ax, n: int = 1, figsize=(4.8, 3.4), **kw):
@@ -128,6 +129,45 @@ def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None
     a.set_ylabel(ylabel or metric)
     a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     a.grid(axis="y", alpha=0.3)
+    if ax is None:
+        fig.tight_layout()
+    return _save(fig, path)
+
+
+def robustness_lines(section: dict, modes: Sequence[str], path=None, ax=None):
+    """The reproduction's robustness section: one panel per user parameter, each mode's
+    mean success over scenes against the parameter's level (the perfect user first),
+    with the scene-level CIs as error bars.
+
+    :param section: parameter -> {"rows": [{"level": v, "modes": {mode: {"u_scene":
+        {"mean": m, "ci": [lo, hi]}}}}, ...]} (``summary.json``'s ``robustness``).
+
+    Example::
+
+        >>> from sweeps.plots import robustness_lines
+        >>> row = lambda v, u: {"level": v, "modes": {"shacc": {"u_scene": {
+        ...     "mean": u, "ci": [u - 0.1, u + 0.1]}}}}
+        >>> fig = robustness_lines({"user_noise": {"rows": [row(0.0, 0.9), row(0.2, 0.8)]}},
+        ...                        ["shacc"])
+    """
+    params = list(section)
+    fig, axes = _figure(ax, len(params), (3.2 * len(params) + 1.5, 3.2), sharey=True)
+    for a, param in zip(axes, params, strict=True):
+        rows = section[param]["rows"]
+        xs = np.arange(len(rows))
+        for k, mode in enumerate(modes):
+            u = [r["modes"][mode]["u_scene"] for r in rows]
+            m = np.array([np.nan if e["mean"] is None else e["mean"] for e in u])
+            lo = np.array([e["ci"][0] if e["ci"] else np.nan for e in u])
+            hi = np.array([e["ci"][1] if e["ci"] else np.nan for e in u])
+            err = np.nan_to_num(np.vstack([m - lo, hi - m]).clip(min=0))
+            a.errorbar(xs + (k - (len(modes) - 1) / 2) * 0.06, m, yerr=err, capsize=3,
+                       marker="o", ms=3, label=mode, color=MODE_COLORS.get(mode))
+        a.set_xticks(xs, [str(r["level"]) for r in rows])
+        a.set_xlabel(param)
+        a.grid(alpha=0.3)
+    axes[0].set_ylabel("success u_scene (mean over scenes)")
+    axes[-1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     if ax is None:
         fig.tight_layout()
     return _save(fig, path)

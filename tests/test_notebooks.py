@@ -10,7 +10,7 @@ import pytest
 
 from sweeps.notebook_runner import NOTEBOOKS, execute, main, parameter_names
 
-NAMES = ["scene_gallery", "success_fields", "clutteredness", "sweep_analysis"]
+NAMES = ["scene_gallery", "success_fields", "clutteredness", "sweep_analysis", "imperfect_users"]
 
 
 def test_every_notebook_is_listed():

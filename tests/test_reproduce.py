@@ -85,3 +85,53 @@ def test_report_figures_and_readme(quick_run):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = readme.read_text()
     assert "\nold\n" not in text and text.endswith("tail\n") and "Pearson" in text
+
+
+def test_robustness_section(quick_run):
+    """Every user parameter at the perfect level and its quick level, in every mode, with
+    scene-level CIs and paired differences to the baseline; the verdict follows from
+    the rows by its rule; the report and the figure show them."""
+    from sweeps import robustness
+
+    out, _ = quick_run
+    s = json.loads((out / "summary.json").read_text())
+    section = s["robustness"]
+    assert list(section) == list(robustness.QUICK_LEVELS)
+    n_scenes = s["categories"]["all"]["n_scenes"]
+    for param, entry in section.items():
+        levels = [r["level"] for r in entry["rows"]]
+        assert levels == [robustness.PERFECT[param], *robustness.QUICK_LEVELS[param]]
+        for r in entry["rows"]:
+            assert set(r["modes"]) == {"baseline", "shrinking", "shacc", "optimized"}
+            assert r["modes"]["shacc"]["u_scene"]["n"] == n_scenes
+            d = r["vs_baseline"]["shacc"]
+            assert d["mean"] == pytest.approx(r["modes"]["shacc"]["u_scene"]["mean"]
+                                              - r["modes"]["baseline"]["u_scene"]["mean"])
+        assert entry["verdict"]["shacc"] == robustness.verdict(entry["rows"], "shacc")
+        assert entry["sentence"] in (out / "report.md").read_text()
+    # The perfect row is the main evaluation's: its ShaCC success is the table's.
+    assert section["user_noise"]["rows"][0]["modes"]["shacc"]["u_scene"]["mean"] == \
+        pytest.approx(s["categories"]["all"]["shacc"]["u_scene"]["mean"])
+    # A noisy user changes something.
+    noisy = section["user_noise"]["rows"]
+    assert any(noisy[0]["modes"][m]["u_scene"]["mean"] != noisy[1]["modes"][m]["u_scene"]["mean"]
+               for m in ("baseline", "shacc"))
+    assert (out / "robustness.png").stat().st_size > 10_000
+
+
+def _row(level, diff, ci):
+    return {"level": level, "vs_baseline": {"shacc": {"mean": diff, "ci": ci}}}
+
+
+@pytest.mark.parametrize(("diffs", "expected"), [
+    ([(0.3, [0.2, 0.4]), (0.28, [0.1, 0.4]), (0.25, [0.05, 0.4])], "holds"),
+    ([(0.3, [0.2, 0.4]), (0.1, [0.02, 0.2])], "shrinks"),
+    ([(0.3, [0.2, 0.4]), (0.25, [-0.05, 0.5])], "shrinks"),
+    ([(0.3, [0.2, 0.4]), (-0.2, [-0.3, -0.1])], "reverses"),
+    ([(0.0, [-0.1, 0.1]), (0.1, [0.05, 0.2])], "none"),
+])
+def test_verdict_rule(diffs, expected):
+    from sweeps.robustness import verdict
+
+    rows = [_row(i, d, ci) for i, (d, ci) in enumerate(diffs)]
+    assert verdict(rows, "shacc") == expected
