@@ -120,10 +120,6 @@ def cmd_run(args) -> None:
     modes = tuple(args.modes)
     rows = []
     dev = jax.devices()[0]
-    if args.stepping:  # tuning: the stepped kernel's scheme on this backend
-        from shacc_jax import users
-
-        users.STEPPING[jax.default_backend()] = tuple(args.stepping)
     if args.devices:
         return _run_devices(args, modes)
     for n in args.sizes:
@@ -132,6 +128,8 @@ def cmd_run(args) -> None:
         if args.grid:
             geometry = _regrid(geometry, *args.grid)
             layout = dataclasses.replace(layout, n_starts=geometry.starts.shape[1])
+        if args.stepping:  # tuning: the stepped kernel's scheme (users.STEPPING)
+            layout = dataclasses.replace(layout, stepping=tuple(args.stepping))
         if args.meta:  # "general" on yaw-only scenes: the Markley path
             layout = dataclasses.replace(layout, meta_formula=args.meta)
         S, T = geometry.task_mask.shape

@@ -192,7 +192,10 @@ class Layout:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
-    samples (``shacc_jax.lanes``).
+    samples (``shacc_jax.lanes``). ``stepping`` (None: the backend's,
+    ``shacc_jax.users.STEPPING``): the stepped program's (share, steps), a 1 / share of
+    the slots checked in full per step and that many steps per loop iteration; the
+    answers are the same for every value.
     """
 
     n_tasks: int
@@ -206,6 +209,7 @@ class Layout:
     swept_checks: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
+    stepping: tuple[int, int] | None = None
 
     def __post_init__(self):
         modes = tuple(self.modes)
@@ -219,6 +223,12 @@ class Layout:
         for name in ("n_tasks", "n_starts", "n_objects", "samples_per_block"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"Layout.{name} must be >= 1, got {getattr(self, name)}")
+        if self.stepping is not None:
+            stepping = tuple(int(v) for v in self.stepping)
+            if len(stepping) != 2 or min(stepping) < 1:
+                raise ValueError(f"Layout.stepping must be None or (share >= 1, steps >= 1), "
+                                 f"got {self.stepping}")
+            object.__setattr__(self, "stepping", stepping)
         if self.lanes_per_block is not None and int(self.lanes_per_block) < 1:
             raise ValueError(f"Layout.lanes_per_block must be >= 1 or None, got "
                              f"{self.lanes_per_block}")

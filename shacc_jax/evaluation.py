@@ -273,7 +273,7 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
                                mode == "shacc", layout.meta_formula, lanes_per_block,
                                layout.swept_checks, jax.default_backend(),
-                               layout.collision_checks)
+                               layout.collision_checks, layout.stepping)
             for mode in layout.modes]
 
 

@@ -419,7 +419,8 @@ class _Pass(NamedTuple):
 
 def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                  formula: str, lanes_per_block: int, swept_checks: bool = False,
-                 backend: str = "cpu", collision_checks: bool = False
+                 backend: str = "cpu", collision_checks: bool = False,
+                 stepping: tuple[int, int] | None = None
                  ) -> tuple[am.Outcome, Array, Array]:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
     T, 4) and the meta steps (S, N, T). ``which``: the mode's spaces (``init`` or
@@ -459,7 +460,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     order = jnp.argsort(-jax.vmap(landing)(scene, start, task)).astype(jnp.int32)
     n_real = (jnp.sum(geometry.task_mask) * N).astype(jnp.int32)
     B = min(lanes_per_block, L)
-    share, unroll = STEPPING[backend if backend in STEPPING else "accelerator"]
+    share, unroll = stepping or STEPPING[backend if backend in STEPPING else "accelerator"]
     F = max(1, B // share)
     R = max(1, B // REFILL_SHARE)
 
