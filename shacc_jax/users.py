@@ -88,7 +88,12 @@ def step_draws(key: Array, k: Int[Array, ""], dtype) -> StepDraws:
     ``key``: two threefry blocks, counters (k, 0) and (k, 1) under the rollout's step
     key, give three 32-bit words; each becomes a float in [0, 1) of 24 bits, the first
     |N(0, 1)| by the inverse of the half-normal's distribution function."""
-    return _step_draws(jax.random.key_data(jax.random.fold_in(key, 1)), k, dtype)
+    return _step_draws(_step_key(key), k, dtype)
+
+
+def _step_key(key: Array) -> Array:
+    """The raw threefry key of a rollout's per-step numbers (``key`` folded with 1)."""
+    return jax.random.key_data(jax.random.fold_in(key, 1))
 
 
 def _step_draws(step_key: Array, k: Int[Array, ""], dtype) -> StepDraws:
@@ -239,10 +244,6 @@ class _State(NamedTuple):
     live: Array       # still stepping
 
 
-def _numbers(x: Params, dtype) -> dict:
-    return am.rollout_numbers(x, dtype)
-
-
 def _shake(lane: _Lane, k: Array) -> Array:
     x = lane.x
     omega_dt = 2.0 * jnp.pi * x.user_tremor_hz * x.dt
@@ -253,7 +254,7 @@ def _shake(lane: _Lane, k: Array) -> Array:
 def _move(lane: _Lane, s: _State) -> _Move:
     """One step of the user, without any check (one lane)."""
     x, dtype = lane.x, s.p.dtype
-    step_length = x.v_max * x.dt
+    step_length = am.rollout_numbers(x, dtype)["step_length"]
     c = jnp.where(x.user_aim_object, lane.aim, shapes.prepared_project(lane.own, s.p))
     d = c - s.p
     length = jnp.sqrt(jnp.dot(d, d))
@@ -285,7 +286,7 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
     the rollout as a collision, without activating or turning. ``g``, ``spaces``,
     ``meta``: the lane's scene."""
     x, dtype = lane.x, p.dtype
-    n = _numbers(x, dtype)
+    n = am.rollout_numbers(x, dtype)
     tau = n["tau"]
     inf = jnp.asarray(jnp.inf, dtype)
 
@@ -384,13 +385,13 @@ def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, scene: A
     pick = (lambda a: a[scene])  # noqa: E731
     g, x, sp = (jax.tree.map(pick, t) for t in (geometry, params, spaces))
     dtype = geometry.starts.dtype
-    n = _numbers(x, dtype)
+    n = am.rollout_numbers(x, dtype)
     pose = g.starts[start]
     key = rollout_key(x.user_seed, g.scene_key, target, g.start_index[start])
     own = jax.tree.map(lambda a: a[target], sp)
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
     return _Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
-                 jax.random.key_data(jax.random.fold_in(key, 1)), rollout_draws(key, dtype),
+                 _step_key(key), rollout_draws(key, dtype),
                  own, g.aim_point[target], path)
 
 
@@ -428,12 +429,16 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
 
     One loop of steps over ``lanes_per_block`` slots, each holding one rollout (a lane:
     scene, start, task). Each step moves every live lane (``_move``); the lanes whose
-    clearance allows it skip the check, and at most 1 / FULL_CHECK_SHARE of the slots
-    are gathered and checked in full (``_check``). A slot whose rollout has ended (an
-    activation or max_steps) writes its answers and takes the next lane of the queue,
-    at most 1 / REFILL_SHARE of the slots a step. The queue holds the real lanes sorted
-    by the perfect user's landing step, longest first, so that the last rollouts, which
-    run while slots empty, are short ones; padded tasks are not run."""
+    clearance allows it skip the check, and at most a 1 / share of the slots are
+    gathered and checked in full (``_check``; the share and the steps per loop
+    iteration are ``stepping``, or the backend's :data:`STEPPING`). A slot whose rollout
+    has ended (an activation, a collision or max_steps) writes its answers and takes the
+    next lane of the queue, once a 1 / REFILL_SHARE of the slots are free. The queue
+    holds the real lanes sorted by the perfect user's landing step, longest first, so
+    that the last rollouts, which run while slots empty, are short ones; padded tasks
+    are not run."""
+    if track and which != "opt":  # the meta weights reuse the check's sdfs of "opt"
+        raise ValueError(f"the meta skill tracks on the opt spaces, not {which!r}")
     S, N, T = geometry.starts.shape[0], geometry.starts.shape[1], geometry.task_mask.shape[1]
     L = S * N * T
     dtype = geometry.starts.dtype
@@ -452,7 +457,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):
-        x = _numbers(jax.tree.map(lambda a: a[s], params), dtype)
+        x = am.rollout_numbers(jax.tree.map(lambda a: a[s], params), dtype)
         path = am.straight_path(jax.tree.map(lambda a: a[s], spaces), t,
                                 geometry.starts[s, n, :3], x["step_length"], x["max_steps"])
         return jnp.where(geometry.task_mask[s, t], path.landing, -1.0)

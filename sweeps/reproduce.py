@@ -43,7 +43,7 @@ from . import claims, plots, robustness
 from .inputs import parse_sets
 from .output import check_output_dir, check_output_file, write_atomic, write_json
 from .pipeline import evaluate_results
-from .stats import mean_ci, partial_corr_ci, pearson_ci
+from .stats import format_ci, mean_ci, partial_corr_ci, pearson_ci
 
 MODES = shacc_jax.ALL_MODES
 CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos",
@@ -284,16 +284,6 @@ def _figures(out, summary, scenes, measures, u_base, field, grid, fr) -> None:
     plt.close("all")
 
 
-def _fmt(entry, digits=2) -> str:
-    if entry is None or entry.get("mean") is None:
-        return "n/a"
-    m = entry["mean"]
-    ci = entry.get("ci")
-    if ci is None:
-        return f"{m:.{digits}f}"
-    return f"{m:.{digits}f} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
-
-
 def _fmt_rho(c) -> str:
     if c.get("rho") is None:
         return "n/a"
@@ -323,7 +313,7 @@ def tables_markdown(summary: dict) -> str:
                   "| --- | --- | " + " | ".join("---" for _ in MODES) + " |"]
         for c in CATEGORIES:
             e = cats[c]
-            cells = " | ".join(_fmt(e[m][metric], digits) for m in MODES)
+            cells = " | ".join(format_ci(e[m][metric], digits) for m in MODES)
             lines.append(f"| {c} | {e['n_scenes']} | {cells} |")
     return "\n".join(lines)
 

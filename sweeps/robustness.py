@@ -23,7 +23,7 @@ from geometry_precompute import PrecomputeResult
 from shacc_jax.types import Search
 
 from .pipeline import evaluate_results
-from .stats import mean_ci, paired_diff_ci
+from .stats import format_ci, mean_ci, paired_diff_ci
 
 # The levels each parameter is evaluated at (besides the perfect user, level 0).
 LEVELS: dict[str, list[Any]] = {
@@ -140,8 +140,8 @@ def markdown(section: dict, modes: Sequence[str]) -> str:
         for r in entry["rows"]:
             u = [r["modes"][m]["u_scene"] for m in modes]
             dr = r["modes"]["shacc"]["delta_R"] if "shacc" in modes else {"mean": None}
-            lines.append(f"| {r['level']} | " + " | ".join(_mean(x) for x in u) + f" | "
-                         f"{_mean(dr, 3)} | "
+            lines.append(f"| {r['level']} | " + " | ".join(format_ci(x) for x in u) + f" | "
+                         f"{format_ci(dr, 3)} | "
                          + " | ".join(_pp(r["vs_baseline"][m]) for m in others) + " |")
         lines += ["", entry["sentence"], ""]
     return "\n".join(lines)
@@ -149,10 +149,3 @@ def markdown(section: dict, modes: Sequence[str]) -> str:
 
 def _upper(text: str) -> str:
     return text[:1].upper() + text[1:]
-
-
-def _mean(d: dict, digits: int = 2) -> str:
-    if d["mean"] is None:
-        return "n/a"
-    ci = "" if d["ci"] is None else f" [{d['ci'][0]:.{digits}f}, {d['ci'][1]:.{digits}f}]"
-    return f"{d['mean']:.{digits}f}{ci}"

@@ -29,7 +29,7 @@ from scipy import stats
 
 LEVEL = 0.95
 
-__all__ = ["LEVEL", "cluster_mean_ci", "group_means", "mean_ci", "paired_diff_ci",
+__all__ = ["LEVEL", "cluster_mean_ci", "format_ci", "group_means", "mean_ci", "paired_diff_ci",
            "partial_corr_ci", "pearson_ci", "pooled_rows_ci", "relative_change_ci"]
 
 
@@ -81,6 +81,28 @@ def mean_ci(values, n_resamples: int = 10_000, seed: int = 0,
                 else None, "n": int(x.size)}
     res = _bootstrap((x,), np.mean, n_resamples, seed, level=level)
     return {"mean": float(x.mean()), "ci": _ci(res), "n": int(x.size)}
+
+
+def format_ci(entry: dict | None, digits: int = 2) -> str:
+    """``"m [lo, hi]"`` of a :func:`mean_ci`-shaped dict (``"m"`` without an interval,
+    ``"n/a"`` without a mean), as the reports print them.
+
+    :param entry: {"mean": m, "ci": [lo, hi] or None, ...}, or None.
+    :param digits: decimals.
+
+    Example::
+
+        >>> from sweeps.stats import format_ci
+        >>> format_ci({"mean": 0.5, "ci": [0.25, 0.75], "n": 4})
+        '0.50 [0.25, 0.75]'
+    """
+    if entry is None or entry.get("mean") is None:
+        return "n/a"
+    m = entry["mean"]
+    ci = entry.get("ci")
+    if ci is None:
+        return f"{m:.{digits}f}"
+    return f"{m:.{digits}f} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
 
 
 def paired_diff_ci(a, b, n_resamples: int = 10_000, seed: int = 0,
