@@ -29,11 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from . import schema
+from . import population, schema
 from .bodies import object_body
 from .errors import InputError
+from .population import POPULATED, Population
 from .precompute import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS, batch_layout
+from .settings import population_range
 from .starts import optimize_start_poses, start_plane, start_poses
 from .templates import TaskSpace
 
@@ -89,6 +91,9 @@ class BakedScenes:
     user_seed: np.ndarray
     user_aim_object: np.ndarray
     activation_swept: np.ndarray
+    user_dist: np.ndarray
+    user_dist_args: np.ndarray
+    user_dist_values: np.ndarray
     q_mask: np.ndarray
     q_min: np.ndarray
     q_init: np.ndarray
@@ -314,6 +319,9 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     params["user_seed"] = np.zeros(S, np.int32)
     params["user_aim_object"] = np.zeros(S, bool)
     params["activation_swept"] = np.zeros(S, bool)
+    params["user_dist"] = np.zeros((S, len(POPULATED)), np.int32)
+    params["user_dist_args"] = np.zeros((S, len(POPULATED), population.ARGS))
+    params["user_dist_values"] = np.zeros((S, len(POPULATED), population.MAX_VALUES))
     out["scene_key"] = np.array([scene_key(r.scene) for r in results], np.int32)
     out["start_index"] = np.broadcast_to(np.arange(starts_arr.shape[1], dtype=np.int32),
                                          starts_arr.shape[:2]).copy()
@@ -359,8 +367,13 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         params["activation_tol"][si] = s["activation_tol"]
         params["max_steps"][si] = s["max_steps"]
         params["ambiguity_nearest"][si] = s["ambiguity"] == "nearest"
-        for k in ("user_noise", "user_lag", "user_tremor", "user_tremor_hz"):
-            params[k][si] = s[k]
+        for i, k in enumerate(POPULATED):
+            # A population's own leaf is unused: each rollout draws its value.
+            value = s[k]
+            params[k][si] = 0.0 if isinstance(value, Population) else value
+            params["user_dist"][si, i], params["user_dist_args"][si, i], \
+                params["user_dist_values"][si, i] = population.encode(value,
+                                                                      *population_range(k))
         params["user_seed"][si] = s["seed"]
         params["user_aim_object"][si] = s["user_aim"] == "object"
         params["activation_swept"][si] = s["activation_check"] == "swept"

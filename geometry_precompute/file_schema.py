@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from .population import MAX_VALUES, POPULATED
 from .scene import (
     DEG_FIELDS,
     ID_LIMIT,
@@ -34,6 +35,7 @@ LOADER_ONLY = {
         "yaw and yaw_deg (half_angle and half_angle_deg) are not both given",
         "objects do not interpenetrate (checked when the geometry is built)",
         "start_grid: n_y * n_z <= 16 777 216; start_z_range: low <= high",
+        "a uniform population's low <= high",
         "names, ids and the description are printable text (a pattern approximates "
         "Unicode's rule)",
     ],
@@ -61,6 +63,9 @@ def settings_schema(values_as_lists: bool = False) -> dict:
     sweep's ``[axes]``)."""
     def value(s) -> dict:
         v = {**s.schema, "description": s.doc, "default": _plain(s.default)}
+        if s.name in POPULATED:
+            v = {"description": s.doc, "default": s.default,
+                 "anyOf": [s.schema, _population_schema(s.schema)]}
         return {"type": "array", "items": v, "minItems": 1} if values_as_lists else v
 
     props: dict[str, Any] = {name: value(s) for name, s in SPECS.items()}
@@ -72,6 +77,20 @@ def settings_schema(values_as_lists: bool = False) -> dict:
     for head, inner in groups.items():
         props[head] = {"type": "object", "properties": inner, "additionalProperties": False}
     return {"type": "object", "properties": props, "additionalProperties": False}
+
+
+def _population_schema(number: dict) -> dict:
+    """A population table of a setting whose number schema is ``number``: one key,
+    uniform [low, high], normal [mean, sd > 0] or values [1 to MAX_VALUES numbers]."""
+    def pair(second: dict) -> dict:
+        return {"type": "array", "prefixItems": [number, second], "items": False,
+                "minItems": 2}
+    return {"type": "object", "minProperties": 1, "maxProperties": 1,
+            "additionalProperties": False,
+            "properties": {"uniform": pair(number),
+                           "normal": pair({"type": "number", "exclusiveMinimum": 0}),
+                           "values": {"type": "array", "items": number, "minItems": 1,
+                                      "maxItems": MAX_VALUES}}}
 
 
 def _plain(v: Any) -> Any:

@@ -24,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from .population import ARGS, MAX_VALUES, POPULATED
+
 # Modes and outcomes (reference/model, statistics).
 MODES = ("baseline", "shrinking", "shacc")
 # The fourth mode: shacc's rules on the spaces the search found; it needs the search
@@ -107,10 +109,20 @@ PARAMS = (
           "task's aim point, not at its space"),
     Field("activation_swept", ("S",), "bool", "activation_check = swept: a step activates "
           "where its segment first enters a space"),
+    Field("user_dist", ("S", len(POPULATED)), "int", "per populated user setting "
+          "(POPULATED: user_noise, user_lag, user_tremor, user_tremor_hz) its distribution: "
+          "0 the plain value, 1 uniform, 2 truncated normal, 3 a list of values"),
+    Field("user_dist_args", ("S", len(POPULATED), ARGS), "float", "uniform: (low, high, "
+          "low, high); normal: (mean, sd, low, high) with the range it is truncated to; "
+          "values: (count, 0, 0, 0)"),
+    Field("user_dist_values", ("S", len(POPULATED), MAX_VALUES), "float", "the values of "
+          "a list (zero after count)"),
 )
 
-# All zero (and user_aim_object False): the perfect user.
-USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object", "activation_swept")
+# All zero (and user_aim_object False): the perfect user. ``user_dist`` above zero: a
+# population, drawn per rollout.
+USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object", "activation_swept",
+        "user_dist")
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),
@@ -186,7 +198,9 @@ class Layout:
     ``collision`` param is on; scenes with it off are not checked). ``stepped_users``:
     whether some scene's simulated user is not the perfect one (a :data:`USER` param
     above zero): the program then steps every rollout (``shacc_jax.users``) instead of
-    the perfect user's closed form. ``swept_checks``: whether some scene checks
+    the perfect user's closed form. ``populations``: whether some scene's user settings
+    are a population (``user_dist`` above zero): each rollout then draws its own, and the
+    rollouts carry the drawn values (``Rollouts.user``). ``swept_checks``: whether some scene checks
     activation along each step's segment (``activation_check`` swept): only then does
     the stepped program trace that check. ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
@@ -206,6 +220,7 @@ class Layout:
     collision_checks: bool = False
     box_objects: bool = False
     stepped_users: bool = False
+    populations: bool = False
     swept_checks: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
@@ -251,6 +266,7 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
         n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
         meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
         collision_checks=collide, box_objects=boxes, stepped_users=stepped,
+        populations=bool((np.asarray(arrays.user_dist) > 0).any()),
         swept_checks=bool(np.asarray(arrays.activation_swept).any()),
         lanes_per_block=lanes_per_block,
         samples_per_block=samples_per_block)

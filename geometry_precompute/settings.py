@@ -24,8 +24,10 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
+from . import population
 from .errors import InputError, SceneWarning, shown
 from .fileio import check_depth
+from .population import POPULATED, Population
 
 
 @dataclass(frozen=True)
@@ -238,6 +240,22 @@ _SPECS = [replace(s, doc=_DOCS[s.name]) for s in _SPECS]
 SPECS: Mapping[str, SettingSpec] = MappingProxyType({s.name: s for s in _SPECS})
 
 
+def population_range(name: str) -> tuple[float, float]:
+    """The closed range that draws of a population of ``name`` (of ``POPULATED``) keep
+    to: the setting's range, an open end moved inside by a millionth of its width (a
+    drawn ``user_lag`` stays below 1). The truncated normal is truncated to it.
+
+    >>> population_range("user_lag")
+    (0, 0.999999)
+    """
+    sch = SPECS[name].schema
+    lo = sch.get("minimum", sch.get("exclusiveMinimum"))
+    hi = sch.get("maximum", sch.get("exclusiveMaximum"))
+    inset = 1e-6 * (hi - lo)
+    return (lo + inset if "exclusiveMinimum" in sch else lo,
+            hi - inset if "exclusiveMaximum" in sch else hi)
+
+
 def describe() -> list[dict[str, str]]:
     """Every setting as a row (name, default, type, rule, stage, meaning): what
     ``shacc settings`` prints."""
@@ -246,8 +264,9 @@ def describe() -> list[dict[str, str]]:
     rows = []
     for s in _SPECS:
         default = list(s.default) if isinstance(s.default, tuple) else s.default
+        kind = kinds[s.kind] + (" " + "|".join(s.choices) if s.choices else "")
         rows.append({"name": s.name, "default": str(default),
-                     "type": kinds[s.kind] + (" " + "|".join(s.choices) if s.choices else ""),
+                     "type": kind + (" or population" if s.name in POPULATED else ""),
                      "rule": s.rule, "stage": s.stage, "meaning": s.doc})
     return rows
 
@@ -273,9 +292,12 @@ def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
     def bad(rule: str) -> InputError:
         return InputError(source, field, rule)
 
+    if spec.name in POPULATED and population.is_table(value):
+        return population.parse(value, spec.check, spec.rule, source, field)
     if spec.kind in ("float", "int"):
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad(f"must be a number, got {shown(value)}")
+            more = " or a population table" if spec.name in POPULATED else ""
+            raise bad(f"must be a number{more}, got {shown(value)}")
         if not _real(value):
             raise bad("must be finite (no NaN or inf)")
         if not spec.check(value):
@@ -355,6 +377,13 @@ def parse_cli_value(name: str, text: str) -> Any:
         raise InputError("<--set>", name, f"unknown setting; known: {', '.join(SPECS)}")
     if spec.kind == "choice":
         return text
+    if name in POPULATED and text.strip().startswith("{"):
+        import tomllib
+        try:
+            return tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError as e:
+            raise InputError("<--set>", name, f"a population is an inline TOML table such as "
+                             f"{{uniform = [0, 0.4]}}: {e}") from None
     if spec.kind in ("int_pair", "float_pair"):
         parts = text.strip("[]() ").replace(",", " ").split()
         if len(parts) != 2:
@@ -380,7 +409,7 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
     def walk(t: Mapping[str, Any], stem: str) -> None:
         for key, value in t.items():
             name = f"{stem}{key}"
-            if isinstance(value, Mapping):
+            if isinstance(value, Mapping) and name not in POPULATED:  # a population stays
                 walk(value, name + ".")
             elif name in out:
                 raise InputError(source, prefix + name, "given twice (once quoted, once as a "
@@ -461,7 +490,9 @@ class Settings(Mapping[str, Any]):
         return {k: v for k, v in self._values.items() if SPECS[k].stage == stage}
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self._values.items()}
+        """The values as plain JSON values (pairs as lists, populations as tables)."""
+        return {k: (list(v) if isinstance(v, tuple) else v.to_json()
+                    if isinstance(v, Population) else v) for k, v in self._values.items()}
 
     def __repr__(self) -> str:
         changed = {k: v for k, v in self._values.items() if v != SPECS[k].default}

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from geometry_precompute.schema import lanes_per_block_default
+from geometry_precompute.schema import PARAMS, lanes_per_block_default
 
 from . import automaton as am
 from . import collision as col
@@ -34,6 +34,8 @@ from . import lanes as lane_scheduler
 from . import tracking, users
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
+
+_TRAILING = {f.name: f.shape[1:] for f in PARAMS}  # a Params leaf's axes after S
 
 
 class Windows(NamedTuple):
@@ -232,15 +234,15 @@ def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
         jnp.where(found, jnp.minimum(k * path.step_length, path.length), out.path_length))
 
 
-def _assemble(geometry: Geometry, out: am.Outcome, r, meta_steps) -> Rollouts:
-    """One scene's rollouts of one mode."""
+def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps) -> Rollouts:
+    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T, U))."""
     T = geometry.task_mask.shape[0]
     orient = (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis)
     dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
         out, r, orient, jnp.arange(T, dtype=jnp.int32))
     code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
-                    r)
+                    r, drawn)
 
 
 def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
@@ -257,12 +259,13 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
         raise ValueError(f"Geometry.start_index has shape {geometry.start_index.shape}, "
                          f"the starts {geometry.starts.shape[:2]} (replace both together: "
                          "each start's index in its whole grid)")
-    ndims = {a.ndim for a in params}
-    shapes = {a.shape for a in params}
-    if len(shapes) != 1 or ndims - {1, 2} or next(iter(shapes))[-1] != S:
-        raise ValueError(f"every Params leaf must have shape (S,) or (P, S) with S = {S} "
-                         f"scenes, got {sorted(shapes)}")
-    return next(iter(shapes))[0] if ndims == {2} else 0
+    # Each leaf is (S, ...) or (P, S, ...), its trailing axes the schema's.
+    lead = {a.shape[:a.ndim - len(_TRAILING[k])] for k, a in zip(Params._fields, params,
+                                                                  strict=True)}
+    if len(lead) != 1 or len(next(iter(lead))) not in (1, 2) or next(iter(lead))[-1] != S:
+        raise ValueError(f"every Params leaf must have shape (S, ...) or (P, S, ...) with S = "
+                         f"{S} scenes, got leading axes {sorted(lead)}")
+    return next(iter(lead))[0] if len(next(iter(lead))) == 2 else 0
 
 
 def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
@@ -273,7 +276,7 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
                                mode == "shacc", layout.meta_formula, lanes_per_block,
                                layout.swept_checks, jax.default_backend(),
-                               layout.collision_checks, layout.stepping)
+                               layout.collision_checks, layout.stepping, layout.populations)
             for mode in layout.modes]
 
 
@@ -333,9 +336,12 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     if points:
         geometry = jax.tree.map(lambda a: jnp.tile(a, (points,) + (1,) * (a.ndim - 1)),
                                 geometry)
-        params = jax.tree.map(lambda a: a.reshape(points * S), params)
+        params = Params._make(a.reshape(points * S, *a.shape[2:]) for a in params)
     per_mode = (_stepped if layout.stepped_users else _closed_form)(geometry, params, layout)
-    per_mode = [jax.vmap(_assemble)(geometry, *one) for one in per_mode]
+    S_all, N = geometry.starts.shape[:2]
+    drawn = (jax.vmap(users.drawn_values)(geometry, params) if layout.populations else
+             jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
+    per_mode = [jax.vmap(_assemble)(geometry, drawn, *one) for one in per_mode]
     rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)
     result = Evaluation(rollouts, batch_metrics(rollouts.outcome, rollouts.delta_R,
                                                 geometry.task_mask))

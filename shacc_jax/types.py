@@ -133,8 +133,10 @@ class Geometry(NamedTuple):
 
 class Params(NamedTuple):
     """Every rollout setting (``geometry_precompute.schema.PARAMS``) as a leaf of shape
-    (S,), or (P, S) for P sweep points over one geometry. Leaves, so new values never
-    recompile. The fields are the schema's, in its order (a test keeps them so)."""
+    (S,), or (P, S) for P sweep points over one geometry; the populations of simulated
+    users (``user_dist*``) have trailing axes: the four populated user settings, then
+    their numbers or a list's 16 values. Leaves, so new values never recompile. The fields are the
+    schema's, in its order (a test keeps them so)."""
 
     dt: Float[Array, "*P S"]
     v_max: Float[Array, "*P S"]
@@ -154,6 +156,9 @@ class Params(NamedTuple):
     user_seed: Int[Array, "*P S"]
     user_aim_object: Bool[Array, "*P S"]
     activation_swept: Bool[Array, "*P S"]
+    user_dist: Int[Array, "*P S 4"]
+    user_dist_args: Float[Array, "*P S 4 4"]
+    user_dist_values: Float[Array, "*P S 4 16"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:
@@ -241,8 +246,12 @@ class Rollouts(NamedTuple):
     ``step``: the step of activation (``max_steps`` on a timeout); ``point``: where it
     ended (m); ``path_length`` (m); ``meta_steps``: steps spent in a meta-skill region;
     ``delta_R`` (rad): the orientation jump at activation, NaN unless success;
-    ``orientation``: the end orientation, a unit quaternion (w, x, y, z). Padded tasks
-    (``task_mask`` False) hold no rollout: read ``[..., :T_scene]``."""
+    ``orientation``: the end orientation, a unit quaternion (w, x, y, z); ``user``: the
+    values of the populated user settings the rollout drew (``user_noise`` rad,
+    ``user_lag``, ``user_tremor`` m, ``user_tremor_hz`` Hz, in that order; the same in every
+    mode), (S, M, N, T, 4) where some scene's user is a population (``Layout.populations``),
+    else (S, M, N, T, 0). Padded tasks (``task_mask`` False) hold no rollout: read
+    ``[..., :T_scene]``."""
 
     outcome: Int[AnyArray, "S M N T"]
     activated: Int[AnyArray, "S M N T"]
@@ -252,6 +261,7 @@ class Rollouts(NamedTuple):
     meta_steps: Int[AnyArray, "S M N T"]
     delta_R: Float[AnyArray, "S M N T"]  # NaN unless success
     orientation: Float[AnyArray, "S M N T 4"]  # R at the end (w, x, y, z)
+    user: Float[AnyArray, "S M N T U"]  # drawn user settings (U = 4 or 0)
 
 
 class SceneMetrics(NamedTuple):

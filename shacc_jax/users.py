@@ -37,6 +37,8 @@ import jax.numpy as jnp
 from jax.extend.random import threefry_2x32
 from jaxtyping import Array, Bool, Float, Int
 
+from geometry_precompute.population import NORMAL, POPULATED, UNIFORM, VALUES
+
 from . import automaton as am
 from . import collision as col
 from . import quaternion as quat
@@ -129,6 +131,61 @@ def user_draws(seed, scene_key, task, start, n_steps: int, dtype=jnp.float32
     key = rollout_key(*(jnp.asarray(v, jnp.int32) for v in (seed, scene_key, task, start)))
     steps = jax.vmap(lambda k: step_draws(key, k, dtype))(jnp.arange(n_steps, dtype=jnp.int32))
     return steps, rollout_draws(key, dtype)
+
+
+def population_values(key: Array, x: Params, dtype) -> Float[Array, "4"]:
+    """The values of the populated user settings (``POPULATED``: user_noise, user_lag,
+    user_tremor, user_tremor_hz) of the rollout ``key`` under one scene's settings ``x``:
+    a setting without a population keeps its value; one with draws from a uniform
+    number u in [0, 1) of the rollout's stream (``key`` folded with 2, one per
+    setting): uniform low + u (high - low); the normal truncated to [low, high] by its
+    inverse distribution function on [F(low), F(high)]; a list's entry floor(u n).
+
+    >>> import jax.numpy as jnp
+    >>> from shacc_jax.types import Params
+    >>> x = Params._make(jnp.zeros(()) for _ in Params._fields)._replace(
+    ...     user_noise=jnp.float32(0.3), user_dist=jnp.array([0, 1, 0, 0]),
+    ...     user_dist_args=jnp.array([[0, 0, 0, 0], [0.2, 0.4, 0.2, 0.4]] + [[0] * 4] * 2,
+    ...                              jnp.float32), user_dist_values=jnp.zeros((4, 16)))
+    >>> v = population_values(jax.random.key(0), x, jnp.float32)
+    >>> float(v[0]), 0.2 <= float(v[1]) < 0.4
+    (0.30000001192092896, True)
+    """
+    u = jax.random.uniform(jax.random.fold_in(key, 2), (len(POPULATED),), dtype)
+    plain = jnp.stack([getattr(x, k) for k in POPULATED]).astype(dtype)
+    a = x.user_dist_args.astype(dtype)
+    uniform = a[:, 0] + u * (a[:, 1] - a[:, 0])
+    mean, sd, lo, hi = a[:, 0], jnp.where(a[:, 1] > 0, a[:, 1], 1.0), a[:, 2], a[:, 3]
+    f_lo = jax.scipy.special.ndtr((lo - mean) / sd)
+    f_hi = jax.scipy.special.ndtr((hi - mean) / sd)
+    normal = jnp.clip(mean + sd * jax.scipy.special.ndtri(f_lo + u * (f_hi - f_lo)), lo, hi)
+    n = jnp.maximum(a[:, 0].astype(jnp.int32), 1)
+    index = jnp.minimum((u * n.astype(dtype)).astype(jnp.int32), n - 1)
+    listed = jnp.take_along_axis(x.user_dist_values.astype(dtype), index[:, None], 1)[:, 0]
+    kind = x.user_dist
+    return jnp.select([kind == UNIFORM, kind == NORMAL, kind == VALUES],
+                      [uniform, normal, listed], plain)
+
+
+def with_population(key: Array, x: Params, dtype) -> Params:
+    """One rollout's settings ``x`` with its drawn values of the populated settings
+    (:func:`population_values`)."""
+    v = population_values(key, x, dtype)
+    return x._replace(**{k: v[i] for i, k in enumerate(POPULATED)})
+
+
+def drawn_values(geometry: Geometry, params: Params) -> Float[Array, "N T 4"]:
+    """Every rollout's drawn user settings of one scene (:func:`population_values`),
+    (N, T, 4): what ``Rollouts.user`` holds for each mode."""
+    dtype = geometry.starts.dtype
+    T = geometry.task_mask.shape[0]
+
+    def one(index, task):
+        key = rollout_key(params.user_seed, geometry.scene_key, task, index)
+        return population_values(key, params, dtype)
+
+    tasks = jnp.arange(T, dtype=jnp.int32)
+    return jax.vmap(lambda i: jax.vmap(lambda t: one(i, t))(tasks))(geometry.start_index)
 
 
 def turn_across(u: Float[Array, "3"], angle: Array, axis_angle: Array) -> Float[Array, "3"]:
@@ -379,15 +436,18 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
     travelled = jnp.where(swept, s.travelled + step_len
                           * (t_hit / jnp.where(seg_len > 0, seg_len, 1.0)), m.travelled)
     return p, active, sd, travelled
-def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, scene: Array,
-           start: Array, target: Array) -> _Lane:
-    """One lane's constants (vmapped over a block)."""
+def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, populations: bool,
+           scene: Array, start: Array, target: Array) -> _Lane:
+    """One lane's constants (vmapped over a block); with ``populations``, its drawn user
+    settings."""
     pick = (lambda a: a[scene])  # noqa: E731
     g, x, sp = (jax.tree.map(pick, t) for t in (geometry, params, spaces))
     dtype = geometry.starts.dtype
-    n = am.rollout_numbers(x, dtype)
     pose = g.starts[start]
     key = rollout_key(x.user_seed, g.scene_key, target, g.start_index[start])
+    if populations:
+        x = with_population(key, x, dtype)
+    n = am.rollout_numbers(x, dtype)
     own = jax.tree.map(lambda a: a[target], sp)
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
     return _Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
@@ -421,7 +481,7 @@ class _Pass(NamedTuple):
 def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                  formula: str, lanes_per_block: int, swept_checks: bool = False,
                  backend: str = "cpu", collision_checks: bool = False,
-                 stepping: tuple[int, int] | None = None
+                 stepping: tuple[int, int] | None = None, populations: bool = False
                  ) -> tuple[am.Outcome, Array, Array]:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
     T, 4) and the meta steps (S, N, T). ``which``: the mode's spaces (``init`` or
@@ -431,7 +491,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     scene, start, task). Each step moves every live lane (``_move``); the lanes whose
     clearance allows it skip the check, and at most a 1 / share of the slots are
     gathered and checked in full (``_check``; the share and the steps per loop
-    iteration are ``stepping``, or the backend's :data:`STEPPING`). A slot whose rollout
+    iteration are ``stepping``, or the backend's :data:`STEPPING`; ``populations``: the
+    lanes draw their user settings, :func:`with_population`). A slot whose rollout
     has ended (an activation, a collision or max_steps) writes its answers and takes the
     next lane of the queue, once a 1 / REFILL_SHARE of the slots are free. The queue
     holds the real lanes sorted by the perfect user's landing step, longest first, so
@@ -453,7 +514,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     task = jnp.tile(jnp.arange(T, dtype=jnp.int32), S * N)
     # Per-lane arrays keep the lane axis last ((3, B), (T, B)): the per-lane code's
     # small vectors are then rows of whole arrays, which XLA vectorises across lanes.
-    make = jax.vmap(partial(_lanes, geometry, params, spaces), out_axes=-1)
+    make = jax.vmap(partial(_lanes, geometry, params, spaces, populations), out_axes=-1)
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):

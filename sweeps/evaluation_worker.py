@@ -36,6 +36,8 @@ class ChunkJob:
     modes: tuple[str, ...]
     shapes: Shapes
     setting_names: tuple[str, ...]  # the scenes table's set.* columns
+    populations: tuple[str, ...] = ()  # settings some point gives a population: their
+    #                                    set.* columns are text, the rollouts carry draws
 
 
 @dataclass(frozen=True)
@@ -237,7 +239,7 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
                         "join": time.perf_counter() - t0})
 
 
-def _evaluate(bakes: list, modes) -> list[tuple]:
+def _evaluate(bakes: list, modes, populations: bool = False) -> list[tuple]:
     """Per point of a chunk: (its Evaluation, its search or None), from one
     ``shacc_jax.run`` with a points axis. Only the COMPACT fields come back, and no
     per-scene metrics: encode_chunk computes them on a CPU worker, off this worker's
@@ -246,7 +248,7 @@ def _evaluate(bakes: list, modes) -> list[tuple]:
 
     import shacc_jax
 
-    fields = tuple(COMPACT)
+    fields = tuple(COMPACT) + (("user",) if populations else ())
     if len(bakes) == 1:  # no points axis to add and take off again
         one = shacc_jax.run(bakes[0], modes, fields=fields, metrics=False)
         assert not isinstance(one.search, list)
@@ -257,17 +259,33 @@ def _evaluate(bakes: list, modes) -> list[tuple]:
             for i, found in enumerate(searches)]
 
 
+def _drawn(user: np.ndarray, b, S: int) -> np.ndarray:
+    """The user settings each rollout drew, (S, M, N, T, 4) float32: the evaluation's
+    where its points had a population, else each scene's plain values (a sweep whose
+    other points have a population keeps one set of columns)."""
+    from geometry_precompute.population import POPULATED
+
+    if user.shape[-1] == len(POPULATED):
+        return user.astype(np.float32)
+    plain = np.stack([np.asarray(getattr(b, k))[:S] for k in POPULATED], -1)
+    return np.broadcast_to(plain[:, None, None, None, :].astype(np.float32),
+                           (*user.shape[:-1], len(POPULATED)))
+
+
 def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
     """A chunk's evaluation from its :func:`join_chunk`. Only the accelerator's part
     runs here; :func:`encode_chunk` makes the tables on a CPU worker."""
     _setup()
     before = dict(_COUNTS)
     t1 = time.perf_counter()
-    evs = _evaluate(joined.bakes, job.modes)
+    evs = _evaluate(joined.bakes, job.modes, bool(job.populations))
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}
                 for ev, _ in evs]
+    if job.populations:
+        for ro, b, (ev, _) in zip(rollouts, joined.bakes, evs, strict=True):
+            ro["user"] = _drawn(ev.rollouts.user[:S], b, S)
     params = [{"q_min": b.q_min[:S], "q_init": b.q_init[:S], "q_shrunk": b.q_shrunk[:S],
                "q_optimized": None if found is None else np.asarray(found.q)[:S],
                "starts": b.starts[:S]} for b, (_, found) in zip(joined.bakes, evs, strict=True)]
@@ -295,7 +313,8 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
         u, mean, counts, _ = scene_metrics(ro["outcome"], ro["delta_R"], task_mask[:S])
         me = SimpleNamespace(u_scene=u, delta_R_mean=mean, outcome_counts=counts)
         parts["scenes"].append(tables.scenes_table(i, p, job.setting_names, job.modes,
-                                                   job.chunk.scenes, arrays.labels, me))
+                                                   job.chunk.scenes, arrays.labels, me,
+                                                   job.populations))
         parts["tasks"].append(tables.tasks_table(i, job.modes, job.chunk.scenes, arrays.labels,
                                                  pa_, ro["outcome"]))
         parts["starts"].append(tables.starts_table(i, job.chunk.scenes, pa_["starts"]))

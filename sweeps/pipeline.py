@@ -82,7 +82,9 @@ def scene_json(ev: Evaluated, s: int) -> dict:
     """The one-scene JSON object (reference/outputs) of scene ``s`` of an evaluated
     batch, as ``shacc evaluate --json`` writes it: task ids, C, clusters, Shrinking's
     parameters, d and h, the starts, per mode the outcome, activated task and delta_R
-    of every (start, task), per task its rates, the settings and the provenance.
+    of every (start, task), with a population of users each (start, task)'s drawn user
+    settings (the same in every mode), per task its rates, the settings and the
+    provenance.
 
     Example::
 
@@ -108,6 +110,11 @@ def scene_json(ev: Evaluated, s: int) -> dict:
             "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
         }
     out["modes"] = modes
+    user = ro.user
+    if user is not None and user.shape[-1]:  # a population: each rollout's drawn values
+        from geometry_precompute.population import POPULATED
+
+        out["users"] = {k: user[s, 0, :, :T, i].tolist() for i, k in enumerate(POPULATED)}
     for m, mode in enumerate(ev.modes):
         modes[mode]["n_rollouts"] = int(me.n_rollouts[s, m])
         modes[mode]["outcome_counts"] = {o: int(c) for o, c in

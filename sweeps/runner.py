@@ -222,6 +222,14 @@ def _setting_names(cfg: SweepConfig) -> tuple[str, ...]:
     return tuple(dict.fromkeys(k for p in cfg.points for k in p))
 
 
+def _populations(cfg: SweepConfig) -> tuple[str, ...]:
+    """The user settings some point gives a population (reference/outputs: their set.*
+    columns are text, and the rollouts table carries every rollout's drawn values)."""
+    from geometry_precompute.population import POPULATED, is_table
+
+    return tuple(k for k in POPULATED if any(is_table(p.get(k)) for p in cfg.points))
+
+
 def _rollouts_per_scene(cfg: SweepConfig, files) -> list[float]:
     """Per sweep point, the rollouts of one scene (a random source: of its mean task
     count), for the progress bar's total."""
@@ -297,7 +305,7 @@ def warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
 
     c = todo[0]
     job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shapes(cfg),
-                   _setting_names(cfg))
+                   _setting_names(cfg), _populations(cfg))
     return job, files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
 
 
@@ -352,7 +360,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             batch_size[f.key] = len(part)
             batches.append(f)
             done.add(f)
-        job = ChunkJob(c, tuple(points), cfg.modes, shp, names)
+        job = ChunkJob(c, tuple(points), cfg.modes, shp, names, _populations(cfg))
         # Joined on a CPU worker: the evaluation worker then only evaluates.
         joined = client.submit(join_chunk, job, *batches, key=f"join-{run}-{c.index}",
                                priority=-c.index, resources=pool.precompute, pure=False)

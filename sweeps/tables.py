@@ -42,7 +42,9 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
     "scenes": {
         "point": ("int64", "", "index of the sweep point (the config's order)"),
         "set.NAME": ("float64 | int64 | string | list", "the setting's",
-                     "the point's value of a swept or fixed setting; null: its default"),
+                     "the point's value of a swept or fixed setting; null: its default; a "
+                     "user setting that some point gives a population is text, e.g. "
+                     "'uniform(0, 0.4)' or '0.2'"),
         "scene_index": ("int64", "", "index of the scene in the source"),
         "scene": ("string", "", "the scene's name"),
         "n_tasks": ("int64", "", "its number of tasks"),
@@ -91,6 +93,11 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "activated": ("int16", "", "the task that activated (-1: none)"),
         "steps": ("int32", "", "step of activation (max_steps on timeout)"),
         "delta_R": ("float32", "rad", "orientation jump at activation; null unless success"),
+        "user_noise": ("float32", "rad", "the user's direction noise this rollout drew; "
+                       "these four columns only in a sweep with a population of users"),
+        "user_lag": ("float32", "", "its lag probability"),
+        "user_tremor": ("float32", "m", "its tremor amplitude"),
+        "user_tremor_hz": ("float32", "Hz", "its tremor frequency"),
     },
 }
 
@@ -180,16 +187,19 @@ def _setting_column(spec_kind: str, values: list) -> pa.Array:
 
 
 def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indices,
-                 labels: dict, metrics) -> pa.Table:
+                 labels: dict, metrics, populations=()) -> pa.Table:
     """One row per scene of one sweep point: identity, the precompute's numbers
     (``labels``: name, n_tasks, C_init, C_final, d, h per scene), and per mode the
-    success rate, mean delta_R and the count of each outcome."""
+    success rate, mean delta_R and the count of each outcome. ``populations``: the
+    settings whose column is text (some point of the sweep gives them a population)."""
+    from geometry_precompute.population import text_of
     from geometry_precompute.settings import SPECS
 
     S = len(scene_indices)
     cols = {"point": numbers_array(np.full(S, point_index, np.int64))}
     for k in setting_names:
-        cols[f"set.{k}"] = _setting_column(SPECS[k].kind, [point.get(k)] * S)
+        cols[f"set.{k}"] = (strings_array([text_of(point.get(k))] * S) if k in populations
+                            else _setting_column(SPECS[k].kind, [point.get(k)] * S))
     cols["scene_index"] = numbers_array(np.asarray(scene_indices, np.int64))
     cols["scene"] = strings_array(labels["name"])
     cols["n_tasks"] = numbers_array(np.asarray(labels["n_tasks"], np.int64))
@@ -263,7 +273,8 @@ def starts_table(point_index: int, scene_indices, starts: np.ndarray) -> pa.Tabl
 def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table:
     """One row per rollout of one sweep point (padding left out), in the order scene,
     mode, start, task: scene, mode, start, intended task, outcome, activated task (-1:
-    none), steps and delta_R."""
+    none), steps and delta_R; where ``rollouts`` has a ``user`` array (S, M, N, T, 4),
+    the user settings each rollout drew."""
     S = len(scene_indices)
     outcome = np.asarray(rollouts.outcome)[:S]
     shape = outcome.shape
@@ -276,7 +287,7 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
         along = np.asarray(values, dtype).reshape([-1 if k == axis else 1 for k in range(4)])
         return np.broadcast_to(along, shape).reshape(-1)[keep]
 
-    return pa.table({
+    cols = {
         "point": numbers_array(np.full(int(keep.sum()), point_index, np.int32)),
         "scene_index": numbers_array(index(0, scene_indices, np.int32)),
         "mode": _dictionary(index(1, np.arange(shape[1]), np.int8), modes),
@@ -286,7 +297,14 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
         "activated": numbers_array(flat(rollouts.activated, np.int16)),
         "steps": numbers_array(flat(rollouts.step, np.int32)),
         "delta_R": numbers_array(dr := flat(rollouts.delta_R, np.float32), valid=np.isfinite(dr)),
-    })
+    }
+    user = getattr(rollouts, "user", None)
+    if user is not None:
+        from geometry_precompute.population import POPULATED
+
+        for i, k in enumerate(POPULATED):
+            cols[k] = numbers_array(flat(np.asarray(user)[..., i], np.float32))
+    return pa.table(cols)
 
 
 def parquet_bytes(table: pa.Table, name: str | None = None,
