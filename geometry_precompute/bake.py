@@ -335,6 +335,12 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         s = r.settings
         for oi, obj in enumerate(r.scene.objects):
             body = object_body(obj)
+            if obj.mesh is not None:
+                if s["collision"] != "off":
+                    raise InputError(r.scene.source, "settings.collision", "collision checks "
+                                     f"against mesh objects (objects[{obj.id}]) are not "
+                                     "available yet; set collision = \"off\"")
+                continue  # not collided with: no slot
             out["obj_mask"][si, oi] = True
             out["obj_center"][si, oi] = body.center
             out["obj_quat"][si, oi] = body.quat

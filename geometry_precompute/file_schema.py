@@ -34,6 +34,7 @@ LOADER_ONLY = {
         "bounds: min <= init",
         "yaw and yaw_deg (half_angle and half_angle_deg) are not both given",
         "objects do not interpenetrate (checked when the geometry is built)",
+        "a mesh file exists and holds a solid (read when the scene is)",
         "start_grid: n_y * n_z <= 16 777 216; start_z_range: low <= high",
         "a uniform population's low <= high",
         "names, ids and the description are printable text (a pattern approximates "
@@ -145,12 +146,21 @@ def _object_schema() -> dict:
             "radius": {**size, "description": "m (mugs and cups)"},
             "height": {**size, "description": "m (mugs and cups)"},
             "half_extents": {**_vector(3, size), "description": "m (boxes)"},
+            "mesh": {**_text(4096), "description": "mesh objects: the mesh file (OBJ, STL, "
+                     "PLY, GLB), relative to the scene file"},
+            "scale": {**size, "description": "mesh objects: metres per unit of the file"},
         },
         "additionalProperties": False,
-        "if": {"properties": {"kind": {"const": "box"}}},
-        "then": {"required": ["half_extents"],
-                 "not": {"anyOf": [{"required": ["radius"]}, {"required": ["height"]}]}},
-        "else": {"not": {"required": ["half_extents"]}},
+        "allOf": [
+            {"if": {"properties": {"kind": {"const": "box"}}},
+             "then": {"required": ["half_extents"],
+                      "not": {"anyOf": [{"required": ["radius"]}, {"required": ["height"]}]}},
+             "else": {"not": {"required": ["half_extents"]}}},
+            {"if": {"properties": {"kind": {"const": "mesh"}}},
+             "then": {"required": ["mesh"],
+                      "not": {"anyOf": [{"required": ["radius"]}, {"required": ["height"]}]}},
+             "else": {"not": {"anyOf": [{"required": ["mesh"]}, {"required": ["scale"]}]}}},
+        ],
     }
 
 

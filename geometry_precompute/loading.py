@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bodies import inside, object_body
+from .bodies import inside_object
 from .scene import Scene, SceneWarning, parse_scene, read_toml
 from .templates import resolve_tasks
 
@@ -120,7 +120,7 @@ def _warn_legal_oddities(scene: Scene, spaces) -> None:
             continue
         g = np.asarray(sp.shape().center)  # the cone's apex is the grasp point
         for o in scene.objects:
-            if o.id != t.object and inside(object_body(o), g):
+            if o.id != t.object and inside_object(o, g):
                 warnings.warn(SceneWarning(
                     f"{scene.source}: tasks[{t.id}]: the handle grasp point "
                     f"{np.round(g, 4).tolist()} lies inside object {o.id!r}"), stacklevel=4)

@@ -27,6 +27,7 @@ import tomli_w
 from .errors import InputError, shown
 from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
 from .fileio import MAX_DEPTH, check_depth, read_bytes_limited, write_atomic
+from .mesh_objects import MeshInfo
 from .settings import (
     COORD_LIMIT,
     DEFAULTS,
@@ -36,11 +37,11 @@ from .settings import (
     flatten_settings,
 )
 
-OBJECT_KINDS = ("mug", "cup", "box")
+OBJECT_KINDS = ("mug", "cup", "box", "mesh")
 TEMPLATE_OBJECTS = {
-    "side_grasp": ("mug", "cup"),
+    "side_grasp": ("mug", "cup", "mesh"),
     "handle_grasp": ("cup",),
-    "top_grasp": ("mug", "cup", "box"),
+    "top_grasp": ("mug", "cup", "box", "mesh"),
     "drawer_pull": ("box",),
 }
 TEMPLATE_PARAMS = {
@@ -69,22 +70,38 @@ class SceneObject:
     radius: float | None = None
     height: float | None = None
     half_extents: tuple[float, float, float] | None = None
+    mesh: MeshInfo | None = None  # kind "mesh": its file and measures
 
     @property
     def body_radius(self) -> float:
-        """The object's radius; for a box the half-diagonal of its top face."""
+        """The object's radius; for a box the half-diagonal of its top face; for a mesh its
+        bounding upright cylinder's about the vertical axis through its origin."""
         if self.kind == "box":
             ex, ey, _ = self.box_half_extents
             return math.hypot(ex, ey)
+        if self.mesh is not None:
+            return self.mesh.radius
         assert self.radius is not None  # the loader gives every cylinder kind its size
         return self.radius
 
     @property
     def body_height(self) -> float:
+        """The object's height; for a mesh its vertices' height range."""
         if self.kind == "box":
             return 2.0 * self.box_half_extents[2]
+        if self.mesh is not None:
+            return self.mesh.z_max - self.mesh.z_min
         assert self.height is not None
         return self.height
+
+    @property
+    def base(self) -> tuple[float, float, float]:
+        """The centre of the object's base on its vertical axis: ``position``, and for a
+        mesh the point below its origin at its lowest vertex's height."""
+        if self.mesh is None:
+            return self.position
+        x, y, z = self.position
+        return (x, y, z + self.mesh.z_min)
 
     @property
     def box_half_extents(self) -> tuple[float, float, float]:
@@ -128,7 +145,8 @@ class Scene:
 
 
 _TOP_KEYS = {"name", "description", "objects", "tasks", "settings"}
-_OBJECT_KEYS = {"id", "kind", "position", "yaw", "yaw_deg", "radius", "height", "half_extents"}
+_OBJECT_KEYS = {"id", "kind", "position", "yaw", "yaw_deg", "radius", "height", "half_extents",
+                "mesh", "scale"}
 # Spellings in degrees, converted on load: the field, and the radian field it stands for.
 DEG_FIELDS = {"yaw_deg": "yaw", "half_angle_deg": "half_angle"}
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
@@ -200,6 +218,23 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
                                    limit=math.degrees(YAW_LIMIT)))
     else:
         yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
+    if kind != "mesh":
+        for key in ("mesh", "scale"):
+            if key in raw:
+                raise InputError(src, where + key, f"not a field of a {kind} (mesh objects "
+                                 "only)")
+    if kind == "mesh":
+        from .mesh_objects import load
+
+        for key in ("radius", "height", "half_extents"):
+            if key in raw:
+                raise InputError(src, where + key, "not a field of a mesh (its size is its "
+                                 "file's, times scale)")
+        if "mesh" not in raw:
+            raise InputError(src, where + "mesh", "missing required field for a mesh object")
+        written = _string(raw["mesh"], src, where + "mesh")
+        scale = _number(raw.get("scale", 1.0), src, where + "scale", positive=True)
+        return SceneObject(oid, kind, position, yaw, mesh=load(written, scale, src, where))
     if kind == "box":
         for key in ("radius", "height"):
             if key in raw:
@@ -334,6 +369,10 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
             d["yaw"] = o.yaw
         if o.kind == "box":
             d["half_extents"] = list(o.box_half_extents)
+        elif o.mesh is not None:
+            d["mesh"] = o.mesh.path  # where it is: the written path may be relative
+            if o.mesh.scale != 1.0:
+                d["scale"] = o.mesh.scale
         else:
             if o.radius != OBJECT_DEFAULTS[o.kind]["radius"]:
                 d["radius"] = o.radius

@@ -72,7 +72,7 @@ def aim_point(template: str, obj: SceneObject, fixed: dict) -> tuple[float, floa
     "object"``): the side grasp's point on the object's axis at half the space's height,
     the handle grasp point g, the top centre of the object, the centre of the drawer's
     face."""
-    x, y, z = obj.position
+    x, y, z = obj.base  # the position, but for a mesh whose lowest point is off its origin
     if template == "side_grasp":
         return (x, y, z + fixed["height"] / 2)
     if template == "handle_grasp":
@@ -104,7 +104,7 @@ def _build_shape(template: str, obj: SceneObject, q, fixed: dict, pose_quat: tup
                  center: tuple | None = None) -> Shape:
     """The template's shape for parameters q; ``center``, when given, is its centre
     (which q does not move, but for the drawer)."""
-    x, y, z = obj.position
+    x, y, z = obj.base  # the position, but for a mesh whose lowest point is off its origin
     if template == "side_grasp":
         h = fixed["height"]
         return Shape("cylinder", center or (x, y, z + h / 2), pose_quat, (float(q[0]), h, 0.0))

@@ -328,7 +328,7 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    from geometry_precompute.bodies import object_body
+    from geometry_precompute.bodies import object_body, object_solid
     from geometry_precompute.starts import start_plane as plane_of
 
     own = ax is None
@@ -350,7 +350,12 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
                 ax.fill(ring[:, 0], ring[:, 1], color=st["color"], alpha=0.10, lw=0)
             ax.plot(ring[:, 0], ring[:, 1], color=st["color"], lw=st["lw"], ls=st["ls"])
     for o in result.scene.objects:
-        ring = _outline_xy(object_body(o))
+        if o.mesh is not None:  # a mesh's footprint: the hull of its vertices seen from above
+            pts = np.asarray(object_solid(o).vertices)[:, :2]
+            ring = pts[ConvexHull(pts).vertices]
+            ring = np.vstack([ring, ring[:1]])
+        else:
+            ring = _outline_xy(object_body(o))
         extent.append(ring)
         ax.fill(ring[:, 0], ring[:, 1], color="k", alpha=0.6, zorder=3)
     handles: list[Artist] = [Patch(fc=SPACE_STYLE["init"]["color"], alpha=0.35,
