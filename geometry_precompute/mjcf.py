@@ -9,11 +9,13 @@ initial, group 2 for optimised spaces, so viewers can toggle them).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .bodies import object_body
+from .bodies import object_body, object_solid
+from .frames import quat_of_rotation, yaw_matrix
 from .meshes import shape_trimesh
 from .precompute import PrecomputeResult
 from .shapes import Shape
@@ -56,7 +58,17 @@ def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "b
                  f'pos="{_fmt(center[:2])} -0.01" rgba="0.75 0.7 0.62 1"/>')
     for o in scene.objects:
         body = object_body(o)
-        geoms.append(_geom(body, f"object:{o.id}", "0.25 0.25 0.28 1", True, 0))
+        if body.kind == "cylinder" and o.mesh is None:
+            # Turned by the yaw (a cup's handle direction), which the round shape does not
+            # show but ``shacc import-mjcf`` reads back.
+            body = replace(body, quat=quat_of_rotation(yaw_matrix(o.yaw)))
+        mesh = None
+        if o.mesh is not None:  # its solid, vertices in world coordinates (as the cones)
+            tm = object_solid(o)
+            mesh = f"object:{o.id}"
+            assets.append(f'<mesh name={quoteattr(mesh)} vertex="{_fmt(tm.vertices)}" '
+                          f'face="{" ".join(str(int(i)) for i in tm.faces.ravel())}"/>')
+        geoms.append(_geom(body, f"object:{o.id}", "0.25 0.25 0.28 1", True, 0, mesh))
     which = {"both": ("init", "opt"), "init": ("init",), "opt": ("opt",), "none": ()}[spaces]
     for w in which:
         shapes = result.shapes_init if w == "init" else result.shapes_opt
@@ -75,6 +87,10 @@ def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "b
         f"<mujoco model={quoteattr(scene.name)}>",
         '  <visual><global offwidth="1920" offheight="1080"/></visual>',
         "  <asset>", *(f"    {a}" for a in assets), "  </asset>",
+        # The object kinds, which the geoms do not show (a cup is a cylinder): read back by
+        # ``shacc import-mjcf``.
+        "  <custom>", *(f'    <text name={quoteattr(f"shacc:kind:{o.id}")} data="{o.kind}"/>'
+                        for o in scene.objects), "  </custom>",
         "  <worldbody>",
         f'    <light pos="{_fmt(center[:2])} 2.0" dir="0 0 -1" diffuse="0.8 0.8 0.8"/>',
         f'    <camera name="overview" mode="targetbody" target="world" pos="{_fmt(eye)}"/>',

@@ -201,6 +201,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_set(c)
     c.set_defaults(func="render:cmd_export")
 
+    c = command("import-mjcf", "turn a MuJoCo scene's named geoms or bodies into a scene "
+                "file (docs/reference/mujoco.md)")
+    c.add_argument("xml", type=_path, help="MJCF file")
+    c.add_argument("--out", required=True, type=_path, help="scene TOML file to write (mesh "
+                   "objects' STL files are written beside it)")
+    c.add_argument("--map", type=_path, help="TOML mapping: [[tasks]] id, object (a geom or "
+                   "body name), template; optional obstacles = [names], [objects.ID] kind")
+    c.add_argument("--task", action="append", default=[], metavar="ID=OBJECT:TEMPLATE",
+                   help="a task (may be repeated; added to the mapping's)")
+    c.add_argument("--obstacle", action="append", default=[], metavar="NAME",
+                   help="a geom or body that becomes an object without a task")
+    c.set_defaults(func="import_cmd:cmd_import_mjcf")
+
     c = command("render", "3-D MuJoCo picture beside the top-down view")
     c.add_argument("scene", type=_path, help="scene TOML file")
     c.add_argument("--out", required=True, type=_path, help="PNG file")

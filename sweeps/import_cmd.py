@@ -1,0 +1,65 @@
+"""``shacc import-mjcf FILE.xml --out SCENE.toml``: a MuJoCo scene's named geoms and bodies
+as a scene file (``geometry_precompute.mjcf_import``), with the tasks a mapping file or
+``--task`` gives. The scene and its mesh files appear together or not at all: they are
+written into a hidden folder beside ``--out``, the scene is read back (every rule of a
+scene file, and that its objects do not interpenetrate), and only then moved into place."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from geometry_precompute import InputError
+from geometry_precompute.errors import HostError
+
+
+def _mapping(args) -> tuple[dict, str]:
+    from geometry_precompute.scene import read_toml
+
+    mapping: dict = read_toml(args.map, "a task mapping (TOML)") if args.map else {}
+    src = str(args.map) if args.map else "<arguments>"
+    tasks = list(mapping.get("tasks", []))
+    for text in args.task:
+        tid, sep, rest = text.partition("=")
+        obj, sep2, template = rest.rpartition(":")
+        if not (sep and sep2 and tid and obj and template):
+            raise InputError("<arguments>", "--task", f"must be ID=OBJECT:TEMPLATE, got {text!r}")
+        tasks.append({"id": tid, "object": obj, "template": template})
+    mapping["tasks"] = tasks
+    mapping["obstacles"] = list(mapping.get("obstacles", [])) + list(args.obstacle)
+    return mapping, src
+
+
+def cmd_import_mjcf(args) -> int:
+    from geometry_precompute import load_scene, precompute
+    from geometry_precompute.fileio import write_atomic
+    from geometry_precompute.mjcf_import import import_mjcf
+
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise InputError("<arguments>", "--out", f"a scene file ends in .toml, got {str(out)!r}")
+    mapping, src = _mapping(args)
+    folder = out.parent if str(out.parent) else Path(".")
+    try:
+        work = Path(tempfile.mkdtemp(prefix=".import-", dir=folder))
+    except OSError as e:
+        raise HostError(folder, "create a folder in", e.strerror or str(e)) from None
+    try:
+        import tomli_w
+
+        table = import_mjcf(args.xml, mapping, work, src)
+        scene_file = work / out.name
+        write_atomic(scene_file, tomli_w.dumps(table).encode())
+        scene = load_scene(scene_file)
+        precompute(scene, scene.settings())  # every rule, interpenetration included
+        meshes = [o["mesh"] for o in table["objects"] if o["kind"] == "mesh"]
+        for name in meshes:
+            os.replace(work / name, folder / name)
+        os.replace(scene_file, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print(f"wrote {out} ({len(table['objects'])} objects, {len(table['tasks'])} tasks"
+          + (f", {len(meshes)} mesh files beside it" if meshes else "") + ")")
+    return 0
