@@ -22,12 +22,16 @@ The table area and the gaussian's spread are a named *preset* (:data:`PRESETS`):
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from .scene import Scene, SceneObject, Task
-from .settings import OBJECT_DEFAULTS
+from .errors import InputError, shown
+from .scene import TEMPLATE_OBJECTS, Scene, SceneObject, Task
+from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
 
 
 class Preset(NamedTuple):
@@ -54,7 +58,8 @@ GENERATOR_VERSION = 1
 
 
 def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks: int = 10,
-                 preset: str = "compact", *, gap: float = 0.01, max_attempts: int = 2000,
+                 preset: str = "compact", generator: Mapping[str, Any] | None = None, *,
+                 gap: float = 0.01, max_attempts: int = 2000,
                  name: str | None = None) -> Scene:
     """A seeded random scene (module docstring; docs/reference/experiments.md).
 
@@ -66,6 +71,9 @@ def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks
     :param preset: the table area and gaussian spread, a name of :data:`PRESETS`:
         "compact" (0.6 m table, sigma 0.10 m) or "paper" (1.3 m, 0.18 m: the paper's
         C_init distribution).
+    :param generator: a configured generator (:func:`check_generator`'s table: object
+        kinds with weights and sizes, mesh folders, templates with weights, the table
+        area, the gaussian's spread, the gap); None: the paper's mugs and cups.
     :param gap: the smallest distance between two bodies, m.
     :returns: a :class:`Scene` named ``random-[PRESET-]KIND-SEED``; the same arguments
         give the same scene on every machine.
@@ -85,6 +93,10 @@ def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks
                          f"{max_tasks}")
     rng = np.random.default_rng(seed)
     n = int(rng.integers(min_tasks, max_tasks + 1))
+    if generator is not None:
+        spec = dict(generator) if generator.get("checked") else \
+            check_generator(generator, "<generator>", "generator")
+        return _configured(rng, spec, kind, n, seed, preset, max_attempts, name)
     for _restart in range(MAX_RESTARTS):
         placed: list[tuple[float, float, float]] = []  # (x, y, radius)
         objects, tasks = [], []
@@ -116,3 +128,177 @@ def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks
     return Scene(name or f"random-{label.replace(' ', '-')}-{seed}", tuple(objects),
                  tuple(tasks), {}, f"random {label} scene, seed {seed}, {n} tasks",
                  f"<random {label} {seed}>")
+
+
+# A configured generator (a sweep's [source.generator]; docs/reference/experiments.md).
+GENERATOR_KINDS = ("mug", "cup", "box", "mesh")
+DEFAULT_TEMPLATES = {"mug": "side_grasp", "cup": "handle_grasp", "box": "drawer_pull",
+                     "mesh": "side_grasp"}
+_GENERATOR_KEYS = {"table", "sigma", "gap", "objects"}
+_ENTRY_KEYS = {"kind", "weight", "radius", "height", "half_extents", "folder", "scale",
+               "templates"}
+MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
+
+
+def check_generator(table: Any, src: str, where: str = "source.generator",
+                    base_dir: Path | None = None) -> dict:
+    """A generator table checked and completed (one-line InputErrors naming ``src`` and
+    the field): ``table`` [x, y] extents of the area (m), ``sigma`` (m), ``gap`` (m) and
+    ``objects``, a list of ``{kind, weight, ...}``: mugs and cups with ``radius`` and
+    ``height`` ranges [low, high] (default the kind's size), boxes with ``half_extents``
+    ranges ([[low, high]] x 3), meshes with a ``folder`` of mesh files (relative to
+    ``base_dir``) and a ``scale``; each entry's ``templates`` a table of template =
+    weight (default the kind's usual one). Returns plain data (folders made absolute,
+    each mesh file's CRC-32 beside it), marked ``checked``: what ``random_scene`` takes.
+
+    >>> check_generator({"objects": [{"kind": "box"}]}, "cfg")["objects"][0]["templates"]
+    {'drawer_pull': 1.0}
+    """
+    def bad(fld: str, rule: str) -> InputError:
+        return InputError(src, f"{where}.{fld}" if fld else where, rule)
+
+    def number(v, fld, lo=0.0, hi=LENGTH_LIMIT, open_lo=True) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
+                or not (lo < v if open_lo else lo <= v) or v > hi:
+            raise bad(fld, f"must be a number in {'(' if open_lo else '['}{lo:g}, {hi:g}], "
+                      f"got {shown(v)}")
+        return float(v)
+
+    def span(v, fld) -> list[float]:
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            v = [v, v]
+        if not isinstance(v, list) or len(v) != 2:
+            raise bad(fld, f"must be a number or [low, high], got {shown(v)}")
+        lo, hi = number(v[0], f"{fld}[0]"), number(v[1], f"{fld}[1]")
+        if lo > hi:
+            raise bad(fld, f"must be [low, high] with low <= high, got {shown(v)}")
+        return [lo, hi]
+
+    if not isinstance(table, Mapping):
+        raise bad("", "must be a table (table, sigma, gap, [[objects]])")
+    if table.get("checked"):  # already this function's result
+        return dict(table)
+    for key in table:
+        if key not in _GENERATOR_KEYS:
+            raise bad(key, f"unknown field (allowed: {sorted(_GENERATOR_KEYS)})")
+    area = table.get("table", [1.3, 1.3])
+    if not isinstance(area, list) or len(area) != 2:
+        raise bad("table", f"must be [x, y] extents in m, got {shown(area)}")
+    out: dict[str, Any] = {"checked": True, "table": [number(area[0], "table[0]", hi=20.0),
+                                     number(area[1], "table[1]", hi=20.0)],
+                           "sigma": number(table.get("sigma", 0.18), "sigma", hi=10.0),
+                           "gap": number(table.get("gap", 0.01), "gap", open_lo=False, hi=1.0)}
+    entries = table.get("objects", [{"kind": "mug"}, {"kind": "cup"}])
+    if not isinstance(entries, list) or not entries:
+        raise bad("objects", "must be a non-empty list of {kind, weight, ...}")
+    out["objects"] = []
+    for i, e in enumerate(entries):
+        w = f"objects[{i}]"
+        if not isinstance(e, Mapping) or e.get("kind") not in GENERATOR_KINDS:
+            raise bad(f"{w}.kind", f"must be one of {', '.join(GENERATOR_KINDS)}, got "
+                      f"{shown(e.get('kind') if isinstance(e, Mapping) else e)}")
+        kind = e["kind"]
+        for key in e:
+            if key not in _ENTRY_KEYS:
+                raise bad(f"{w}.{key}", f"unknown field (allowed: {sorted(_ENTRY_KEYS)})")
+        allowed = {"mug": {"radius", "height"}, "cup": {"radius", "height"},
+                   "box": {"half_extents"}, "mesh": {"folder", "scale"}}[kind]
+        for key in ("radius", "height", "half_extents", "folder", "scale"):
+            if key in e and key not in allowed:
+                raise bad(f"{w}.{key}", f"not a field of a {kind} entry")
+        entry: dict[str, Any] = {"kind": kind, "weight": number(e.get("weight", 1.0),
+                                                                 f"{w}.weight", hi=1e6)}
+        if kind in ("mug", "cup"):
+            for key in ("radius", "height"):
+                entry[key] = span(e.get(key, OBJECT_DEFAULTS[kind][key]), f"{w}.{key}")
+        elif kind == "box":
+            he = e.get("half_extents", [[0.1, 0.15], [0.15, 0.2], [0.1, 0.15]])
+            if not isinstance(he, list) or len(he) != 3:
+                raise bad(f"{w}.half_extents", f"must be three [low, high] ranges, got "
+                          f"{shown(he)}")
+            entry["half_extents"] = [span(v, f"{w}.half_extents[{k}]") for k, v in enumerate(he)]
+        else:
+            folder = e.get("folder")
+            if not isinstance(folder, str) or not folder or not folder.isprintable():
+                raise bad(f"{w}.folder", "must name a folder of mesh files")
+            path = Path(folder) if base_dir is None else base_dir / folder
+            files = sorted(str(p.resolve()) for p in path.glob("*")
+                           if p.suffix.lower() in MESH_SUFFIXES) if path.is_dir() else []
+            if not files:
+                raise bad(f"{w}.folder", f"no mesh files ({', '.join(MESH_SUFFIXES)}) in "
+                          f"{shown(folder)}")
+            import zlib
+
+            entry["files"] = files
+            # Their content names them in cache keys and the sweep's hash: a file changed
+            # in place is a new mesh.
+            entry["digests"] = [zlib.crc32(Path(f).read_bytes()) for f in files]
+            entry["scale"] = number(e.get("scale", 1.0), f"{w}.scale")
+        templates = e.get("templates", {DEFAULT_TEMPLATES[kind]: 1})
+        if not isinstance(templates, Mapping) or not templates:
+            raise bad(f"{w}.templates", "must be a table of template = weight")
+        entry["templates"] = {}
+        for t, weight in templates.items():
+            if t not in TEMPLATE_OBJECTS or kind not in TEMPLATE_OBJECTS[t]:
+                fits = [k for k, kinds in TEMPLATE_OBJECTS.items() if kind in kinds]
+                raise bad(f"{w}.templates.{t}", f"does not fit a {kind} (fits: "
+                          f"{', '.join(fits)})")
+            entry["templates"][t] = number(weight, f"{w}.templates.{t}", hi=1e6)
+        out["objects"].append(entry)
+    return out
+
+
+def _pick(rng: np.random.Generator, weights) -> int:
+    w = np.asarray(weights, float)
+    return int(rng.choice(len(w), p=w / w.sum()))
+
+
+def _configured(rng: np.random.Generator, spec: dict, kind: str, n: int, seed: int,
+                preset: str, max_attempts: int, name: str | None) -> Scene:
+    """A scene of the configured generator ``spec`` (``check_generator``'s)."""
+    from .mesh_objects import load
+
+    half_x, half_y = spec["table"][0] / 2, spec["table"][1] / 2
+    entries = spec["objects"]
+    for _restart in range(MAX_RESTARTS):
+        placed: list[tuple[float, float, float]] = []
+        objects, tasks = [], []
+        for i in range(n):
+            e = entries[_pick(rng, [x["weight"] for x in entries])]
+            k = e["kind"]
+            yaw = 0.0 if k == "mug" else float(rng.uniform(-np.pi, np.pi))
+            size: dict[str, Any]
+            if k in ("mug", "cup"):
+                size = {"radius": float(rng.uniform(*e["radius"])),
+                        "height": float(rng.uniform(*e["height"]))}
+                reach, oid = size["radius"], f"{k}{i}"
+            elif k == "box":
+                he = tuple(float(rng.uniform(*r)) for r in e["half_extents"])
+                size = {"half_extents": he}
+                reach, oid = math.hypot(he[0], he[1]), f"box{i}"
+            else:
+                file = e["files"][int(rng.integers(len(e["files"])))]
+                mesh = load(file, e["scale"], "<generator>", f"objects[{i}].")
+                size = {"mesh": mesh}
+                reach, oid = mesh.radius, f"{Path(file).stem}{i}"
+            for _ in range(max_attempts):
+                xy = (rng.uniform([-half_x, -half_y], [half_x, half_y]) if kind == "uniform"
+                      else rng.normal(0.0, spec["sigma"], size=2))
+                if all(np.hypot(xy[0] - x, xy[1] - y) - reach - r >= spec["gap"]
+                       for x, y, r in placed):
+                    break
+            else:
+                break
+            placed.append((float(xy[0]), float(xy[1]), reach))
+            objects.append(SceneObject(oid, k, (float(xy[0]), float(xy[1]), 0.0), yaw, **size))
+            names = list(e["templates"])
+            template = names[_pick(rng, list(e["templates"].values()))]
+            tasks.append(Task(f"{template.split('_')[0]}-{oid}", oid, template))
+        if len(objects) == n:
+            break
+    else:
+        raise ValueError(f"could not place {n} objects {spec['gap']} m apart in "
+                         f"{MAX_RESTARTS} tries")
+    return Scene(name or f"random-configured-{kind}-{seed}", tuple(objects), tuple(tasks), {},
+                 f"random configured {kind} scene, seed {seed}, {n} tasks",
+                 f"<random configured {kind} {seed}>")

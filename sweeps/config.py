@@ -13,6 +13,8 @@ over any setting of the settings (reference/settings), validated in full before 
     sampling = "both"                            # "uniform" | "gaussian" | "both"
     seed = 0
     preset = "compact"                           # or "paper": the generator's table area
+    # [source.generator]: which objects, sizes, mesh folders and templates (optional;
+    # docs/reference/experiments.md)
     # ... or scene files:  kind = "files"; path = "scenes/" (relative to this file)
 
     [settings]                                   # optional: fixed for every point
@@ -51,7 +53,7 @@ from geometry_precompute.scene import Scene, read_toml, scene_to_dict
 from geometry_precompute.settings import INT32_MAX, flatten_settings
 
 _TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}
-_RANDOM = {"kind", "count", "tasks", "sampling", "seed", "preset"}
+_RANDOM = {"kind", "count", "tasks", "sampling", "seed", "preset", "generator"}
 MAX_COUNT = 100_000_000  # random scenes in one sweep
 MAX_POINTS = 100_000     # sweep points (the point list is built, checked and stored)
 MAX_CHUNK = 1_000_000    # scenes per chunk
@@ -85,6 +87,8 @@ class SweepConfig:
                  "both": ["uniform", "gaussian"]}[src["sampling"]]
         preset = src.get("preset", "compact")
         ref = (src["seed"] + i, kinds[i % len(kinds)], *src["tasks"])
+        if "generator" in src:
+            return (*ref, preset, src["generator"])
         return ref if preset == "compact" else (*ref, preset)
 
     def n_scenes(self) -> int:
@@ -114,13 +118,26 @@ class SweepConfig:
         scenes = [scene_to_dict(s) for s in self.scenes()] if self.source["kind"] == "files" \
             else None
         return {"name": self.name, "modes": list(self.modes), "chunk": self.chunk,
-                "source": self.source, "scene_files": scenes,
+                "source": _portable(self.source), "scene_files": scenes,
                 "points": self.points, "defaults": DEFAULTS.to_dict(),
                 "shacc_version": installed_version()}
 
     def hash(self) -> str:
         blob = json.dumps(self.resolved(), sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _portable(source: dict) -> dict:
+    """The source as the hash sees it: a generator's mesh files by name and content (a
+    CRC-32 of each), not by where they lie on this machine."""
+    if "generator" not in source:
+        return source
+    objects = []
+    for e in source["generator"]["objects"]:
+        if "files" in e:
+            e = {**e, "files": [Path(f).name for f in e["files"]]}
+        objects.append(e)
+    return {**source, "generator": {**source["generator"], "objects": objects}}
 
 
 def installed_version() -> str:
@@ -194,6 +211,11 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
                       "tasks": list(tasks), "sampling": sampling, "seed": seed}
         if preset != "compact":  # the hash of a compact sweep stays what it was
             source_out["preset"] = preset
+        if "generator" in raw:
+            from geometry_precompute.generate import check_generator
+
+            source_out["generator"] = check_generator(raw["generator"], src,
+                                                      "source.generator", base_dir)
     elif raw["kind"] == "files":
         for key in raw:
             if key not in _FILES:
@@ -260,11 +282,30 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     return cfg
 
 
-def _probe_scene() -> Scene:
+def _probe_scene(generator: dict | None = None) -> Scene:
     """The object kinds and templates the random generator uses, at their default
-    sizes, far apart: a point's template settings are checked on it."""
+    sizes (a configured generator's: every kind at its largest, every mesh file, every
+    template), far apart: a point's template settings are checked on it."""
     from geometry_precompute.scene import parse_scene
 
+    if generator is not None:
+        objects: list[dict] = []
+        tasks: list[dict] = []
+        for i, e in enumerate(generator["objects"]):
+            sizes = ([{"radius": e["radius"][1], "height": e["height"][1]}]
+                     if e["kind"] in ("mug", "cup") else
+                     [{"half_extents": [r[1] for r in e["half_extents"]]}]
+                     if e["kind"] == "box" else
+                     [{"mesh": f, "scale": e["scale"]} for f in e["files"]])
+            for k, size in enumerate(sizes):
+                oid = f"{e['kind']}{i}-{k}"
+                objects.append({"id": oid, "kind": e["kind"],
+                                "position": [float(len(objects) % 10), float(len(objects) // 10),
+                                             0.0], **size})
+                tasks += [{"id": f"{t}-{oid}", "object": oid, "template": t}
+                          for t in e["templates"]]
+        return parse_scene({"name": "probe", "objects": objects, "tasks": tasks},
+                           "<generator>")
     return parse_scene({"name": "probe", "objects": [
         {"id": "mug", "kind": "mug", "position": [0.0, 0.0, 0.0]},
         {"id": "cup", "kind": "cup", "position": [0.0, 5.0, 0.0]}], "tasks": [
@@ -278,7 +319,8 @@ def _check_templates_fit(cfg: SweepConfig, src: str) -> None:
     precompute-stage settings matter, so each distinct set of them is checked once."""
     from geometry_precompute.templates import resolve_tasks
 
-    scenes = cfg.scenes() if cfg.source["kind"] == "files" else [_probe_scene()]
+    scenes = cfg.scenes() if cfg.source["kind"] == "files" else \
+        [_probe_scene(cfg.source.get("generator"))]
     seen: set[str] = set()
     for k, point in enumerate(cfg.points):
         stage = json.dumps(DEFAULTS.with_overrides(point).by_stage("precompute"),
@@ -290,7 +332,7 @@ def _check_templates_fit(cfg: SweepConfig, src: str) -> None:
             try:
                 resolve_tasks(scene, scene.settings(DEFAULTS, point))
             except InputError as e:
-                where = "the random generator's mugs and cups" if scene.source == \
+                where = "the random generator's objects" if scene.source == \
                     "<generator>" else e.source
                 raise InputError(src, f"point {k}", f"{e.field} of {where}: {e.rule} "
                                  f"(the point sets {shown(point)})") from None

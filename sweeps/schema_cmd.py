@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 
 from geometry_precompute.file_schema import DRAFT, _vector, settings_schema
-from geometry_precompute.generate import MAX_TASKS, PRESETS
+from geometry_precompute.generate import GENERATOR_KINDS, MAX_TASKS, PRESETS
 from geometry_precompute.schema import ALL_MODES
 from geometry_precompute.settings import INT32_MAX
 
@@ -18,8 +18,36 @@ LOADER_ONLY = [
     "source.tasks: min <= max; source.seed + source.count stays a 32-bit integer",
     "the axes and [[points]] give at most 100 000 points",
     "every template of the settings fits the scenes' objects",
+    "source.generator: ranges low <= high, templates that fit their entry's kind, fields "
+    "of the entry's kind only, a mesh folder that holds mesh files",
     "the rules of a scene's [settings] that a schema cannot state, for every value",
 ]
+
+
+def _generator_schema() -> dict:
+    """A random source's [source.generator] (``geometry_precompute.generate``)."""
+    def span(hi: float = 10.0) -> dict:
+        number = {"type": "number", "exclusiveMinimum": 0, "maximum": hi}
+        return {"anyOf": [number, _vector(2, number)]}
+
+    entry = {
+        "type": "object", "required": ["kind"],
+        "properties": {
+            "kind": {"enum": list(GENERATOR_KINDS)},
+            "weight": {"type": "number", "exclusiveMinimum": 0, "maximum": 1e6},
+            "radius": span(), "height": span(), "half_extents": _vector(3, span()),
+            "folder": {"type": "string", "minLength": 1},
+            "scale": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
+            "templates": {"type": "object", "minProperties": 1,
+                          "additionalProperties": {"type": "number", "exclusiveMinimum": 0,
+                                                   "maximum": 1e6}}},
+        "additionalProperties": False}
+    return {"type": "object", "properties": {
+        "table": _vector(2, {"type": "number", "exclusiveMinimum": 0, "maximum": 20}),
+        "sigma": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
+        "gap": {"type": "number", "minimum": 0, "maximum": 1},
+        "objects": {"type": "array", "minItems": 1, "items": entry}},
+        "additionalProperties": False}
 
 
 def sweep_schema() -> dict:
@@ -32,7 +60,8 @@ def sweep_schema() -> dict:
                                             "maximum": MAX_TASKS}),
                        "sampling": {"enum": ["uniform", "gaussian", "both"]},
                        "seed": {"type": "integer", "minimum": 0, "maximum": INT32_MAX},
-                       "preset": {"enum": list(PRESETS)}},
+                       "preset": {"enum": list(PRESETS)},
+                       "generator": _generator_schema()},
         "additionalProperties": False}
     files_source = {
         "type": "object", "required": ["kind", "path"],

@@ -63,7 +63,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "task": ("int16", "", "index of the task in its scene"),
         "task_id": ("string", "", "the task's id in the scene"),
         "object_id": ("string", "", "the id of the object it acts on"),
-        "object_kind": ("string", "", "mug, cup or box"),
+        "object_kind": ("string", "", "mug, cup, box or mesh"),
         "template": ("string", "", "side_grasp, handle_grasp, top_grasp or drawer_pull"),
         "param_names": ("list<string>", "", "the shrinkable parameters, in order"),
         "q_min": ("list<float64>", "m or rad", "their lower bounds"),
