@@ -57,10 +57,12 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
-def _load_bake(path: str, n: int, collision: bool = False, user=None):
+def _load_bake(path: str, n: int, collision: bool = False, user=None,
+               population: bool = False):
     """The first n scenes of a bake file (repeated if it holds fewer), as an object with
     the bake's arrays as attributes; ``user``: (user_noise, user_lag, user_tremor) for
-    every scene (an imperfect simulated user, stepped)."""
+    every scene (an imperfect simulated user, stepped); with ``population`` each of the
+    three drawn per rollout, uniform on [0, twice the value] (the same means)."""
     from types import SimpleNamespace
 
     data = np.load(path)
@@ -77,16 +79,20 @@ def _load_bake(path: str, n: int, collision: bool = False, user=None):
         if user is not None and k in schema.USER[:3]:
             a = np.full_like(a, user[schema.USER.index(k)])
         arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
+    if population and user is not None:
+        for i, value in enumerate(user):
+            arrays["user_dist"][:, i] = 1  # uniform
+            arrays["user_dist_args"][:, i] = [0.0, 2 * value, 0.0, 2 * value]
     return SimpleNamespace(**arrays)
 
 
 def _load(path: str, n: int, collision: bool = False, modes=schema.MODES, block=None,
-          chunk: int = 16, user=None):
+          chunk: int = 16, user=None, population: bool = False):
     """(geometry, params, layout) of the first n scenes of a bake file (repeated if it
     holds fewer)."""
     import shacc_jax
 
-    return shacc_jax.inputs(_load_bake(path, n, collision, user), modes,
+    return shacc_jax.inputs(_load_bake(path, n, collision, user, population), modes,
                             lanes_per_block=block, samples_per_block=chunk)
 
 
@@ -124,7 +130,7 @@ def cmd_run(args) -> None:
         return _run_devices(args, modes)
     for n in args.sizes:
         geometry, params, layout = _load(args.bake, n, args.collision, modes, args.block,
-                                         args.chunk, args.user)
+                                         args.chunk, args.user, args.population)
         if args.grid:
             geometry = _regrid(geometry, *args.grid)
             layout = dataclasses.replace(layout, n_starts=geometry.starts.shape[1])
@@ -151,6 +157,7 @@ def cmd_run(args) -> None:
                    jax.default_backend(), layout.collision_checks, layout.stepped_users),
                "chunk": layout.samples_per_block, "collision": args.collision,
                "user": args.user, "stepped": layout.stepped_users,
+               "population": layout.populations,
                "meta": layout.meta_formula, "stepping": args.stepping,
                "compile_s": t1 - t0, "run_s_median": med, "run_s_min": min(times),
                "rollouts_per_s": rollouts / med}
@@ -308,6 +315,8 @@ def main() -> None:
                    help='collision = "mjx" for every scene (the bake holds the objects)')
     r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
                    help="an imperfect simulated user in every scene (stepped rollouts)")
+    r.add_argument("--population", action="store_true",
+                   help="with --user: each rollout draws its user, uniform on [0, 2 x]")
     r.add_argument("--stepping", type=int, nargs=2, metavar=("SHARE", "UNROLL"),
                    help="stepped users: check 1/SHARE of the lanes in full per step, "
                    "UNROLL steps per loop iteration (users.STEPPING)")

@@ -447,6 +447,9 @@ def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, populati
     key = rollout_key(x.user_seed, g.scene_key, target, g.start_index[start])
     if populations:
         x = with_population(key, x, dtype)
+    # Drawn (or plain): the distributions are not carried in the lane's state.
+    x = x._replace(user_dist=jnp.zeros((), jnp.int32), user_dist_args=jnp.zeros((), dtype),
+                   user_dist_values=jnp.zeros((), dtype))
     n = am.rollout_numbers(x, dtype)
     own = jax.tree.map(lambda a: a[target], sp)
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
