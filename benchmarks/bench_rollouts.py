@@ -312,7 +312,7 @@ def main() -> None:
     r.add_argument("--devices", type=int, nargs="+",
                    help="time shacc_jax.run planned over these device counts")
     r.add_argument("--collision", action="store_true",
-                   help='collision = "mjx" for every scene (the bake holds the objects)')
+                   help='collision = "on" for every scene (the bake holds the objects)')
     r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
                    help="an imperfect simulated user in every scene (stepped rollouts)")
     r.add_argument("--population", action="store_true",

@@ -349,7 +349,7 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
                 out["obj_size"][si, oi] = body.dims
             else:
                 out["obj_size"][si, oi] = (body.dims[0], body.dims[1] / 2, 0.0)
-        params["collision"][si] = s["collision"] == "mjx"
+        params["collision"][si] = s["collision"] == "on"
         for k in schema.GRIPPER:
             params[k][si] = s[k.replace("gripper_", "gripper.")]
         for ti, space in enumerate(r.spaces):

@@ -23,7 +23,7 @@ from .scene import (
     TEMPLATE_PARAMS,
     YAW_LIMIT,
 )
-from .settings import COORD_LIMIT, LENGTH_LIMIT, SPECS
+from .settings import COORD_LIMIT, LENGTH_LIMIT, OLD_COLLISION, SPECS
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 
@@ -64,6 +64,8 @@ def settings_schema(values_as_lists: bool = False) -> dict:
     sweep's ``[axes]``)."""
     def value(s) -> dict:
         v = {**s.schema, "description": s.doc, "default": _plain(s.default)}
+        if s.name == "collision":  # the old name of "on" is still read (with a warning)
+            v["enum"] = [*s.choices, OLD_COLLISION]
         if s.name in POPULATED:
             v = {"description": s.doc, "default": s.default,
                  "anyOf": [s.schema, _population_schema(s.schema)]}

@@ -95,7 +95,7 @@ PARAMS = (
     Field("activation_tol", ("S",), "float", "tau: activation tolerance, m"),
     Field("max_steps", ("S",), "int", "steps before a timeout"),
     Field("ambiguity_nearest", ("S",), "bool", "ambiguity = nearest (else fail)"),
-    Field("collision", ("S",), "bool", "collision = mjx: this scene's rollouts are checked"),
+    Field("collision", ("S",), "bool", "collision = on: this scene's rollouts are checked"),
     Field("gripper_finger_length", ("S",), "float", "gripper.finger_length, m"),
     Field("gripper_finger_radius", ("S",), "float", "gripper.finger_radius, m"),
     Field("gripper_opening", ("S",), "float", "gripper.opening, m"),

@@ -119,7 +119,7 @@ _SPECS: list[SettingSpec] = [
     _spec("start_orientation", "random", "choice", "starts", _choice("random", "forward"),
           ("random", "forward")),
     _spec("seed", 0, "int", "starts", _range(0, INT32_MAX)),
-    _spec("collision", "off", "choice", "rollout", _choice("off", "mjx"), ("off", "mjx")),
+    _spec("collision", "off", "choice", "rollout", _choice("off", "on"), ("off", "on")),
     # The simulated user (reference/model, "Simulated users"): all zero is the paper's
     # perfect user. Angles in rad, lengths in m; the ranges catch degrees and centimetres.
     _spec("user_noise", 0.0, "float", "rollout", _range(0, math.pi / 2)),
@@ -130,7 +130,7 @@ _SPECS: list[SettingSpec] = [
           ("space", "object")),
     _spec("activation_check", "steps", "choice", "rollout", _choice("steps", "swept"),
           ("steps", "swept")),
-    # The gripper of collision = "mjx" (reference/mujoco): two finger capsules along the
+    # The gripper of collision = "on" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
     _spec("gripper.finger_radius", 0.008, "float", "rollout", _range(0, 1, lo_open=True)),
@@ -190,7 +190,8 @@ _DOCS = {
     "start_orientation": "start orientations: random (seeded) or forward (approach +x)",
     "seed": "seed of the random start orientations and of the simulated user's random "
             "numbers",
-    "collision": "gripper collision checking: off, or mjx (exact capsule checks, as MuJoCo)",
+    "collision": "gripper collision checking: off, or on (exact capsule checks against "
+                 "cylinders and boxes, as MuJoCo's; \"mjx\", its old name, still works)",
     "user_noise": "simulated user: each step's direction turned by |N(0, user_noise^2)| "
                   "about a random axis across it, rad",
     "user_lag": "simulated user: probability that a step repeats the previous one",
@@ -292,6 +293,10 @@ def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
     def bad(rule: str) -> InputError:
         return InputError(source, field, rule)
 
+    if spec.name == "collision" and value == OLD_COLLISION:
+        _warn_once(f"{source}: {field}: \"{OLD_COLLISION}\" is the old name of \"on\" (the "
+                   "checks are exact closed forms, not MJX's); write collision = \"on\"")
+        value = "on"
     if spec.name in POPULATED and population.is_table(value):
         return population.parse(value, spec.check, spec.rule, source, field)
     if spec.kind in ("float", "int"):
@@ -333,6 +338,18 @@ def _coerce(spec: SettingSpec, value: Any, source: str, field: str) -> Any:
 # Legal settings that are almost certainly a unit mistake (a warning, not an error).
 OMEGA_LIMIT = 20 * math.pi   # rad/s: ten turns a second; degrees per second were meant
 TEMPLATE_LENGTH_LIMIT = 1.0  # m: a template size above this looks like centimetres
+
+
+# The collision setting's value before it was renamed; read as "on", with a warning.
+OLD_COLLISION = "mjx"
+
+
+def _warn_once(message: str) -> None:
+    import warnings
+
+    if message not in _WARNED:  # settings are validated again at every override
+        _WARNED.add(message)
+        warnings.warn(SceneWarning(message), stacklevel=5)
 
 
 def _warn_unit(spec: SettingSpec, value: Any, source: str, field: str) -> None:

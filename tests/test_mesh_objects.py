@@ -107,7 +107,7 @@ def _real_scene(folder: Path) -> Path:
 
 def test_real_meshes_go_through_every_stage(tmp_path):
     """Real meshes: the one that is not watertight stands for its convex hull (a warning
-    says so), the others are their own solids; precompute, every mode, the MJCF (loaded
+    says so), the others are their own solids; precompute, the paper's modes, the MJCF (loaded
     by MuJoCo, each mesh object a mesh geom of its solid) and the top view work."""
     path = _real_scene(tmp_path)
     with warnings.catch_warnings(record=True) as caught:
@@ -128,8 +128,8 @@ def test_real_meshes_go_through_every_stage(tmp_path):
     assert scene.object("thumb").body_radius == pytest.approx(np.hypot(v[:, 0], v[:, 1]).max())
     assert scene.object("thumb").body_height == pytest.approx(np.ptp(v[:, 2]))
     r = precompute(scene, scene.settings(DEFAULTS, GRID))
-    run = shacc_jax.run(bake([r]), shacc_jax.ALL_MODES)
-    assert run.evaluation.metrics.u_scene.shape == (1, 4)
+    run = shacc_jax.run(bake([r]))
+    assert run.evaluation.metrics.u_scene.shape == (1, 3)
     assert (run.evaluation.metrics.n_rollouts == 6 * 4).all()
     model = mujoco.MjModel.from_xml_string(scene_to_mjcf(r, spaces="none"))
     names = [model.geom(i).name for i in range(model.ngeom)]
@@ -208,7 +208,7 @@ def test_bad_mesh_objects_get_one_line_errors(tmp_path):
         load_scene(path)
     path = _write(tmp_path, {"kind": "mesh", "mesh": "c.stl", "position": [0, 0, 0]})
     s = load_scene(path)
-    r = precompute(s, s.settings(DEFAULTS, {**GRID, "collision": "mjx"}))
+    r = precompute(s, s.settings(DEFAULTS, {**GRID, "collision": "on"}))
     with pytest.raises(InputError, match="collision checks against mesh objects"):
         bake([r])
 

@@ -186,9 +186,9 @@ def test_dry_run_budgets_collision_checks(tmp_path):
         mb = {c: dry_run(parse_config({"name": "c", "source": source,
                                        "settings": {"collision": c}}, "<test>", ROOT),
                          workers=1)["estimated_memory_per_chunk_MB"]
-              for c in ("off", "mjx")}
+              for c in ("off", "on")}
         assert mb["off"] > 0, kind
-        assert mb["mjx"] / mb["off"] == pytest.approx(
+        assert mb["on"] / mb["off"] == pytest.approx(
             bytes_per_rollout(True, platform) / bytes_per_rollout(False, platform)
         ), kind
 

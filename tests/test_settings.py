@@ -144,3 +144,25 @@ def test_both_forms_of_one_name_is_an_error(tmp_path):
 def test_overrides_from_python_take_nested_tables_too():
     s = DEFAULTS.with_overrides({"side_grasp": {"radius_init": 0.17}, "v_max": 0.2})
     assert s["side_grasp.radius_init"] == 0.17 and s["v_max"] == 0.2
+
+
+def test_the_old_collision_value_is_read_as_on_with_a_warning():
+    """collision = "mjx", its name before the checks became closed forms, is "on" with a
+    one-line warning; the JSON Schema accepts both, and nothing else."""
+    import warnings
+
+    from jsonschema import Draft202012Validator
+
+    from geometry_precompute.errors import SceneWarning
+    from geometry_precompute.file_schema import settings_schema
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = DEFAULTS.with_overrides({"collision": "mjx"}, "old.toml")
+    assert s["collision"] == "on"
+    said = [str(w.message) for w in caught if issubclass(w.category, SceneWarning)]
+    assert said == ['old.toml: collision: "mjx" is the old name of "on" (the checks are exact '
+                    'closed forms, not MJX\'s); write collision = "on"']
+    schema = Draft202012Validator(settings_schema())
+    assert all(schema.is_valid({"collision": v}) for v in ("off", "on", "mjx"))
+    assert not schema.is_valid({"collision": "yes"})

@@ -491,7 +491,7 @@ def test_sweep_over_collision_and_gripper_sizes(tmp_path):
     from sweeps.plan import point_groups
 
     text = CONFIG.replace("v_max = [0.15, 0.3]\nstart_grid = [[2, 2]]",
-                          'collision = ["off", "mjx"]\ngripper.opening = [0.04, 0.14]\n'
+                          'collision = ["off", "on"]\ngripper.opening = [0.04, 0.14]\n'
                           "start_grid = [[4, 3]]")
     cfg = load_config(write(tmp_path, text))
     assert point_groups(cfg) == [(0, 1, 2, 3)]
@@ -501,8 +501,8 @@ def test_sweep_over_collision_and_gripper_sizes(tmp_path):
     by = {(p["collision"], p["gripper.opening"]): int(hits[i])
           for i, p in enumerate(cfg.points)}
     assert by[("off", 0.04)] == 0 and by[("off", 0.14)] == 0
-    assert by[("mjx", 0.04)] > 0 and by[("mjx", 0.14)] > 0
-    assert by[("mjx", 0.04)] != by[("mjx", 0.14)]
+    assert by[("on", 0.04)] > 0 and by[("on", 0.14)] > 0
+    assert by[("on", 0.04)] != by[("on", 0.14)]
 
 
 def test_modes_come_back_in_the_order_asked(shipped_bake):

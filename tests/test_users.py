@@ -35,7 +35,7 @@ USERS = {
     "swept": {"activation_check": "swept"},
     "swept-all": {"activation_check": "swept", "user_noise": 0.2, "user_lag": 0.2,
                   "user_tremor": 0.008},
-    "collision-all": {"collision": "mjx", "user_noise": 0.2, "user_lag": 0.2,
+    "collision-all": {"collision": "on", "user_noise": 0.2, "user_lag": 0.2,
                       "user_tremor": 0.008},
     # A population: each rollout draws its own user (the reference is given the values
     # the kernel reports it drew).
@@ -96,9 +96,11 @@ def _draws(baked, scene: int, n_steps: int):
     return jax.tree.map(np.asarray, steps), jax.tree.map(np.asarray, once)
 
 
-# "all" (every parameter at once, fixed) is left to the swept and collision cases and
-# the population (all four drawn per rollout), for the suite's time.
-@pytest.mark.parametrize("name", [n for n in USERS if n != "all"])
+# Left out for the suite's time: "all" (every parameter at once, fixed), which the
+# swept, collision and population cases cover, and "swept" alone, which "swept-all"
+# covers with the same program (test_swept_activation_does_not_depend_on_the_speed
+# checks the perfect user's swept rollouts).
+@pytest.mark.parametrize("name", [n for n in USERS if n not in ("all", "swept")])
 def test_stepped_users_agree_with_the_reference(scenes, name):
     """Each user parameter alone, and all together, a user aiming at the object (alone
     and noisy), and a population of users (each rollout's drawn values): every rollout
@@ -257,7 +259,7 @@ def test_the_perfect_user_stepped_with_collision_checks_is_the_closed_form(scene
     """With collision checks on, a perfect user's stepped lanes collide where, and only
     where, the closed form's lane pass finds a penetration: the same outcomes, steps,
     points and meta steps in every mode."""
-    baked = _bake(scenes, {"collision": "mjx"})
+    baked = _bake(scenes, {"collision": "on"})
     closed = _evaluate(baked)
     stepped = _evaluate(baked, stepped_users=True, lanes_per_block=40)
     real = closed.rollouts.outcome != shacc_jax.types.INVALID
@@ -274,6 +276,6 @@ def test_user_settings_have_ranges():
         with pytest.raises(InputError, match=name):
             DEFAULTS.with_overrides({name: bad})
     # Imperfect users are checked for collisions; the swept check is not.
-    DEFAULTS.with_overrides({"collision": "mjx", "user_lag": 0.1, "user_aim": "object"})
+    DEFAULTS.with_overrides({"collision": "on", "user_lag": 0.1, "user_aim": "object"})
     with pytest.raises(InputError, match=r"activation_check.*collision"):
-        DEFAULTS.with_overrides({"collision": "mjx", "activation_check": "swept"})
+        DEFAULTS.with_overrides({"collision": "on", "activation_check": "swept"})

@@ -35,7 +35,7 @@ def batches():
 
     files = [load_scene(p) for p in shipped_scene_paths() + extra_scene_paths()]
     yield "files", [precompute(s) for s in files]
-    yield "files_collision", [precompute(s, {"collision": "mjx"}) for s in files[:12]]
+    yield "files_collision", [precompute(s, {"collision": "on"}) for s in files[:12]]
     yield "random", [precompute(random_scene(3000 + i, "uniform" if i % 2 else "gaussian",
                                              2, 12, "paper")) for i in range(RANDOM)]
 
