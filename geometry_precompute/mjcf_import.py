@@ -129,8 +129,13 @@ def import_mjcf(xml: str | Path, mapping: Mapping[str, Any], mesh_dir: str | Pat
         kind = model.geom_type[g]
         if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
             yaw = _upright(rot, str(xml), fld, name)
-            want = kinds.get(oid, {}).get("kind") if isinstance(kinds.get(oid), Mapping) else None
-            want = want or recorded.get(oid) if recorded.get(oid) in ("mug", "cup") else want
+            asked = kinds.get(oid)
+            want = asked.get("kind") if isinstance(asked, Mapping) else None
+            if want is not None and want not in ("mug", "cup"):
+                raise InputError(src, f"objects.{oid}.kind", f"a cylinder is a mug or a cup, "
+                                 f"got {shown(want)}")
+            if want is None and recorded.get(oid) in ("mug", "cup"):
+                want = recorded[oid]
             obj = {"id": oid, "kind": want or ("cup" if oid in handles else "mug"),
                    "position": (pos - [0.0, 0.0, size[1]]).tolist(), "radius": size[0],
                    "height": 2 * size[1], "yaw": yaw}

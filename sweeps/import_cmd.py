@@ -52,8 +52,11 @@ def cmd_import_mjcf(args) -> int:
         table = import_mjcf(args.xml, mapping, work, src)
         scene_file = work / out.name
         write_atomic(scene_file, tomli_w.dumps(table).encode())
-        scene = load_scene(scene_file)
-        precompute(scene, scene.settings())  # every rule, interpenetration included
+        try:
+            scene = load_scene(scene_file)
+            precompute(scene, scene.settings())  # every rule, interpenetration included
+        except InputError as e:  # named by the scene it would have been, not the draft
+            raise InputError(f"{out} (from {args.xml})", e.field, e.rule) from None
         meshes = [o["mesh"] for o in table["objects"] if o["kind"] == "mesh"]
         for name in meshes:
             os.replace(work / name, folder / name)

@@ -159,7 +159,8 @@ def test_a_mujoco_scene_of_nested_bodies_imports_by_name(kitchen, tmp_path):
     (["--task", "t=leaning:side_grasp"], "objects[leaning]: geom 'leaning' is tilted 20"),
     (["--task", "t=nothing:side_grasp"], "no geom or body named 'nothing'"),
     (["--task", "t-side_grasp"], "--task: must be ID=OBJECT:TEMPLATE"),
-    (["--task", "t=crate:drawer_pul"], "unknown template"),
+    (["--task", "t=crate:drawer_pul"], "k.toml (from "),
+    (["--task", "t=crate:drawer_pul"], "tasks[t].template: unknown template"),
     ([], "tasks: must be a non-empty list"),
 ])
 def test_bad_imports_are_one_line_and_leave_nothing(kitchen, tmp_path, capsys, args, message):
@@ -168,6 +169,7 @@ def test_bad_imports_are_one_line_and_leave_nothing(kitchen, tmp_path, capsys, a
     assert main(["import-mjcf", str(kitchen), "--out", str(out), *args]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
+    assert ".import-" not in err  # the draft's folder is never named
     assert list(out.parent.iterdir()) == []  # no scene, no mesh file, no work folder
 
 
@@ -179,3 +181,14 @@ def test_a_file_mujoco_cannot_load_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith(f"error: {bad}: <mjcf>: MuJoCo cannot load it: ") and \
         err.count("\n") == 1
+
+
+def test_a_cylinder_asked_to_be_a_box_is_one_line(kitchen, tmp_path, capsys):
+    mapping = tmp_path / "m.toml"
+    mapping.write_text(tomli_w.dumps({"tasks": [{"id": "t", "object": "mug_body",
+                                                 "template": "side_grasp"}],
+                                      "objects": {"mug_body": {"kind": "box"}}}))
+    assert main(["import-mjcf", str(kitchen), "--out", str(tmp_path / "k.toml"),
+                 "--map", str(mapping)]) == 2
+    assert f"{mapping}: objects.mug_body.kind: a cylinder is a mug or a cup, got 'box'" in \
+        capsys.readouterr().err
