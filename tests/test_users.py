@@ -25,6 +25,11 @@ from geometry_precompute import (
 )
 from shacc_jax import runplan, users
 
+# A population: each rollout draws its own user (the reference is given the values the
+# kernel reports it drew).
+POPULATION = {"user_noise": {"uniform": [0.0, 0.4]}, "user_lag": {"values": [0.0, 0.3]},
+              "user_tremor": {"normal": [0.008, 0.004]},
+              "user_tremor_hz": {"uniform": [2.0, 6.0]}}
 USERS = {
     "noise": {"user_noise": 0.3},
     "lag": {"user_lag": 0.3},
@@ -33,15 +38,10 @@ USERS = {
     "object": {"user_aim": "object"},
     "object-noisy": {"user_aim": "object", "user_noise": 0.2},
     "swept": {"activation_check": "swept"},
-    "swept-all": {"activation_check": "swept", "user_noise": 0.2, "user_lag": 0.2,
-                  "user_tremor": 0.008},
-    "collision-all": {"collision": "on", "user_noise": 0.2, "user_lag": 0.2,
-                      "user_tremor": 0.008},
-    # A population: each rollout draws its own user (the reference is given the values
-    # the kernel reports it drew).
-    "population": {"user_noise": {"uniform": [0.0, 0.4]}, "user_lag": {"values": [0.0, 0.3]},
-                   "user_tremor": {"normal": [0.008, 0.004]},
-                   "user_tremor_hz": {"uniform": [2.0, 6.0]}},
+    # Every parameter at once, drawn per rollout, with the swept check or with collisions
+    # (one program each: the fixed values take the same code as a population's draws).
+    "swept-population": {"activation_check": "swept", **POPULATION},
+    "collision-population": {"collision": "on", **POPULATION},
 }
 
 
@@ -97,7 +97,7 @@ def _draws(baked, scene: int, n_steps: int):
 
 
 # Left out for the suite's time: "all" (every parameter at once, fixed), which the
-# swept, collision and population cases cover, and "swept" alone, which "swept-all"
+# swept and collision populations cover, and "swept" alone, which "swept-population"
 # covers with the same program (test_swept_activation_does_not_depend_on_the_speed
 # checks the perfect user's swept rollouts).
 @pytest.mark.parametrize("name", [n for n in USERS if n not in ("all", "swept")])
@@ -235,7 +235,7 @@ def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
     gives the same rollouts, drawn from a population of users; and on a scene whose
     spaces Shrinking leaves alone the baseline and shrinking modes (the same spaces, the
     same draws) agree rollout for rollout."""
-    overrides = USERS["population"]
+    overrides = POPULATION
     alone = shacc_jax.run(_bake(scenes[1:2], overrides), shacc_jax.MODES).evaluation
     batch = _bake([*scenes, *scenes[:3]], overrides)  # seven scenes
     devices = jax.devices("cpu")[:2]
