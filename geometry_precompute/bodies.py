@@ -92,7 +92,6 @@ def check_bodies_apart(scene: Scene) -> None:
                              f"(signed distance {d:.4g} m < -1e-6 m)")
 
 
-
 def _solid_box(obj: SceneObject) -> tuple[np.ndarray, np.ndarray]:
     """A world axis-aligned box around the object's solid."""
     if obj.mesh is None:

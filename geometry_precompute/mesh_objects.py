@@ -55,7 +55,6 @@ class MeshInfo:
     z_max: float
     hull: bool
     faces: int
-    convex: bool = False  # its solid is convex (its hull, or a convex mesh)
     vertices: np.ndarray | None = field(default=None, compare=False, repr=False)
     triangles: np.ndarray | None = field(default=None, compare=False, repr=False)
     path: str = field(default="", compare=False, repr=False)
@@ -74,12 +73,12 @@ def resolve(written: str, source: str) -> Path:
 @functools.lru_cache(maxsize=128)
 def _read(path: str, stamp: tuple[int, int]):
     """(digest, trimesh.Trimesh) of a mesh file, as read (cached per file and stamp)."""
+    import io
+
     import trimesh
 
     data = Path(path).read_bytes()
     kind = Path(path).suffix.lower().lstrip(".")
-    import io
-
     mesh = trimesh.load(io.BytesIO(data), file_type=kind, force="mesh", process=True)
     return zlib.crc32(data), mesh
 
@@ -122,9 +121,8 @@ def load(written: str, scale: float, source: str, where: str) -> MeshInfo:
     v = np.asarray(mesh.vertices, float) * scale
     radius = float(np.max(np.hypot(v[:, 0], v[:, 1])))
     info = MeshInfo(digest, float(scale), radius, float(v[:, 2].min()), float(v[:, 2].max()),
-                    hull, len(mesh.faces), hull or bool(mesh.is_convex),
-                    np.asarray(body.vertices, float) * scale, np.asarray(body.faces, np.int64),
-                    str(path.resolve()), written)
+                    hull, len(mesh.faces), np.asarray(body.vertices, float) * scale,
+                    np.asarray(body.faces, np.int64), str(path.resolve()), written)
     if hull:
         warnings.warn(SceneWarning(f"{source}: {fld}: {written!r} is not watertight ({why}); "
                                    "its convex hull stands for it"), stacklevel=4)

@@ -54,15 +54,6 @@ class Population:
         """The table as written in a settings file."""
         return {self.kind: list(self.numbers)}
 
-    def bounds(self) -> tuple[float, float]:
-        """The smallest and largest value a draw can take (normal: the range's ends are
-        the truncation, so the caller's range)."""
-        if self.kind == "values":
-            return min(self.numbers), max(self.numbers)
-        if self.kind == "uniform":
-            return self.numbers[0], self.numbers[1]
-        return -math.inf, math.inf
-
 
 def is_table(value: Any) -> bool:
     return isinstance(value, Mapping | Population)
