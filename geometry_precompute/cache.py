@@ -51,10 +51,11 @@ def _digest(blob: dict) -> str:
 
 
 def scene_key(scene: Scene, settings: Settings) -> str:
-    """The key of a scene: its content, its precompute-stage settings and the
-    precompute's version (a rollout setting never asks for a new precompute)."""
+    """The key of a scene: its content (with its template files' definitions), its
+    precompute-stage settings and the precompute's version (a rollout setting never asks
+    for a new precompute)."""
     return _digest({"scene": scene_to_dict(scene), "settings": settings.by_stage("precompute"),
-                    "version": PRECOMPUTE_VERSION})
+                    "templates": scene.templates.digest(), "version": PRECOMPUTE_VERSION})
 
 
 def random_key(ref: tuple, settings: Settings) -> str:

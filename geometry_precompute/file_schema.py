@@ -35,6 +35,8 @@ LOADER_ONLY = {
         "yaw and yaw_deg (half_angle and half_angle_deg) are not both given",
         "objects do not interpenetrate (checked when the geometry is built)",
         "a mesh file exists and holds a solid (read when the scene is)",
+        "a template file exists and is valid; where a scene names template files, its "
+        "tasks' templates, bounds and fixed dimensions are checked against them",
         "start_grid: n_y * n_z <= 16 777 216; start_z_range: low <= high",
         "a uniform population's low <= high",
         "names, ids and the description are printable text (a pattern approximates "
@@ -125,7 +127,9 @@ def _task_schema() -> dict:
         "type": "object",
         "required": ["id", "object", "template"],
         "properties": {"id": _text(), "object": _text(),
-                       "template": {"enum": list(TEMPLATE_OBJECTS)},
+                       "template": {**_text(), "description": "a built-in template ("
+                                    f"{', '.join(TEMPLATE_OBJECTS)}) or one of the scene's "
+                                    "template files"},
                        "bounds": {"type": "object"}, "fixed": {"type": "object"}},
         "additionalProperties": False,
         "allOf": variants,
@@ -181,6 +185,91 @@ def scene_schema() -> dict:
             "objects": {"type": "array", "minItems": 1, "items": _object_schema()},
             "tasks": {"type": "array", "minItems": 1, "items": _task_schema()},
             "settings": settings_schema(),
+            "templates": {"type": "array", "items": _text(4096),
+                          "description": "template files, relative to the scene file, "
+                          "whose templates the tasks may use beside the built-in ones"},
         },
+        "additionalProperties": False,
+        # Without template files, a task's template is a built-in one.
+        "if": {"not": {"required": ["templates"]}},
+        "then": {"properties": {"tasks": {"items": {"properties": {
+            "template": {"enum": list(TEMPLATE_OBJECTS)}}}}}},
+    }
+
+
+TEMPLATE_LOADER_ONLY = [
+    "expressions use numbers, + - * /, parentheses, pi, sqrt sin cos tan radians, "
+    "object.<measure>, settings.<geometry setting>, and (where allowed) the template's "
+    "fixed dimensions and parameters",
+    "center and dims are affine in the parameters, and every parameter is used by them",
+    "object.half_x, half_y and half_z only in templates that fit boxes only",
+    "aim is given where the parameters move the centre",
+    "a fixed dimension is not also a parameter; names are not reserved words (pi, the "
+    "functions, object, settings)",
+    "a direction is not the zero vector; a template's name is not defined twice",
+    "the space of each task is finite, with dimensions > 0 and a cone's half angle below "
+    "pi/2 at both bounds (checked when a task is resolved)",
+]
+
+
+def templates_schema() -> dict:
+    """The JSON Schema of a template file (``geometry_precompute.template_files``)."""
+    from .template_files import (
+        _PARAM_KEYS,
+        EXPR_LIMIT,
+        MAX_PARAMS,
+        MAX_TEMPLATES,
+        OBJECT_KINDS,
+        SHAPE_DIMS,
+        UNITS,
+    )
+
+    name = r"^(?!.*__)[a-z_][a-z0-9_]{0,63}$"
+    expr = {"anyOf": [{"type": "number"},
+                      {"type": "string", "minLength": 1, "maxLength": EXPR_LIMIT,
+                       "pattern": r"\S"}],
+            "description": "a number, or an expression in a string (docs/reference/"
+                           "templates.md)"}
+    direction = _vector(3, {"type": "number"})
+    param_fields = {"min": expr, "init": expr, "unit": {"enum": list(UNITS)}}
+    assert set(param_fields) == _PARAM_KEYS
+    param = {"type": "object", "required": ["min", "init"], "properties": param_fields,
+             "additionalProperties": False}
+    shapes = [{"if": {"properties": {"shape": {"const": k}}},
+               "then": {"properties": {"dims": _vector(len(dims), expr)}}}
+              for k, dims in SHAPE_DIMS.items()]
+    template = {
+        "type": "object",
+        "required": ["fits", "shape", "center", "dims", "orientation"],
+        "properties": {
+            "description": {"type": "string", "maxLength": 300},
+            "fits": {"type": "array", "minItems": 1, "uniqueItems": True,
+                     "items": {"enum": list(OBJECT_KINDS)}},
+            "shape": {"enum": list(SHAPE_DIMS)},
+            "params": {"type": "object", "maxProperties": MAX_PARAMS,
+                       "propertyNames": {"pattern": name},
+                       "additionalProperties": param},
+            "fixed": {"type": "object", "propertyNames": {"pattern": name},
+                      "additionalProperties": expr},
+            "center": _vector(3, expr),
+            "rotation": {"anyOf": [{"enum": ["world", "object"]}, direction]},
+            "dims": {"type": "array", "items": expr},
+            "orientation": {"anyOf": [{"const": "point_to_axis"}, direction]},
+            "aim": _vector(3, expr),
+        },
+        "additionalProperties": False,
+        "allOf": shapes,
+    }
+    return {
+        "$schema": DRAFT,
+        "title": "ShaCC template file",
+        "description": "Skill templates as data (docs/reference/templates.md). Checked by "
+                       "the loader only: " + "; ".join(TEMPLATE_LOADER_ONLY) + ".",
+        "type": "object",
+        "required": ["templates"],
+        "properties": {"templates": {"type": "object", "minProperties": 1,
+                                     "maxProperties": MAX_TEMPLATES,
+                                     "propertyNames": {"pattern": name},
+                                     "additionalProperties": template}},
         "additionalProperties": False,
     }

@@ -22,6 +22,7 @@ The table area and the gaussian's spread are a named *preset* (:data:`PRESETS`):
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -30,8 +31,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import InputError, shown
-from .scene import TEMPLATE_OBJECTS, Scene, SceneObject, Task
+from .scene import Scene, SceneObject, Task
 from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
+from .template_files import BUILTIN_SET, TemplateSet, template_set
 
 
 class Preset(NamedTuple):
@@ -134,7 +136,7 @@ def random_scene(seed: int, kind: str = "uniform", min_tasks: int = 5, max_tasks
 GENERATOR_KINDS = ("mug", "cup", "box", "mesh")
 DEFAULT_TEMPLATES = {"mug": "side_grasp", "cup": "handle_grasp", "box": "drawer_pull",
                      "mesh": "side_grasp"}
-_GENERATOR_KEYS = {"table", "sigma", "gap", "objects"}
+_GENERATOR_KEYS = {"table", "sigma", "gap", "objects", "template_files"}
 _ENTRY_KEYS = {"kind", "weight", "radius", "height", "half_extents", "folder", "scale",
                "templates"}
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
@@ -188,6 +190,12 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
                                      number(area[1], "table[1]", hi=20.0)],
                            "sigma": number(table.get("sigma", 0.18), "sigma", hi=10.0),
                            "gap": number(table.get("gap", 0.01), "gap", open_lo=False, hi=1.0)}
+    tset = BUILTIN_SET
+    if "template_files" in table:
+        tset = template_set(table["template_files"], src, f"{where}.template_files", base_dir)
+        # Their definitions name them in cache keys and the sweep's hash.
+        out["template_files"] = list(tset.files)
+        out["template_digest"] = tset.digest()
     entries = table.get("objects", [{"kind": "mug"}, {"kind": "cup"}])
     if not isinstance(entries, list) or not entries:
         raise bad("objects", "must be a non-empty list of {kind, weight, ...}")
@@ -239,8 +247,8 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
             raise bad(f"{w}.templates", "must be a table of template = weight")
         entry["templates"] = {}
         for t, weight in templates.items():
-            if t not in TEMPLATE_OBJECTS or kind not in TEMPLATE_OBJECTS[t]:
-                fits = [k for k, kinds in TEMPLATE_OBJECTS.items() if kind in kinds]
+            if t not in tset or kind not in tset[t].fits:
+                fits = [n for n in tset.names() if kind in tset[n].fits]
                 raise bad(f"{w}.templates.{t}", f"does not fit a {kind} (fits: "
                           f"{', '.join(fits)})")
             entry["templates"][t] = number(weight, f"{w}.templates.{t}", hi=1e6)
@@ -301,4 +309,22 @@ def _configured(rng: np.random.Generator, spec: dict, kind: str, n: int, seed: i
                          f"{MAX_RESTARTS} tries")
     return Scene(name or f"random-configured-{kind}-{seed}", tuple(objects), tuple(tasks), {},
                  f"random configured {kind} scene, seed {seed}, {n} tasks",
-                 f"<random configured {kind} {seed}>")
+                 f"<random configured {kind} {seed}>", generator_templates(spec))
+
+
+def generator_templates(spec: Mapping[str, Any]) -> TemplateSet:
+    """The templates a checked generator's scenes can use: the built-in ones and those of
+    its ``template_files`` (read once per process and files' content)."""
+    files = spec.get("template_files")
+    if not files:
+        return BUILTIN_SET
+    return _template_files(tuple(files), spec.get("template_digest", ""))
+
+
+@functools.lru_cache(maxsize=16)
+def _template_files(files: tuple[str, ...], digest: str) -> TemplateSet:
+    tset = template_set(list(files), "<generator>", "template_files")
+    if tset.digest() != digest:
+        raise InputError("<generator>", "template_files", "a template file changed while the "
+                         "sweep ran; run it again")
+    return tset

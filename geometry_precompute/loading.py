@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .bodies import inside_object
+from .errors import InputError
 from .scene import Scene, SceneWarning, parse_scene, read_toml
 from .templates import resolve_tasks
 
@@ -42,6 +43,32 @@ def load_scene(path: str | Path) -> Scene:
         print(scene.name, result.C_init, result.C_final)
     """
     return scene_from_dict(read_toml(path, "a scene TOML file"), str(path))
+
+
+def scene_files(folder: str | Path) -> list[Path]:
+    """The scene files of a folder: its ``*.toml`` files, sorted, less its template files
+    (a file whose one table is ``[templates]``, which scenes of the folder may name).
+
+    :param folder: a folder.
+    :returns: the paths, in name order.
+
+    Example::
+
+        >>> from geometry_precompute import shipped_scene_paths
+        >>> from geometry_precompute.loading import scene_files
+        >>> len(scene_files(shipped_scene_paths()[0].parent))
+        12
+    """
+    out = []
+    for p in sorted(Path(folder).glob("*.toml")):
+        try:
+            data = read_toml(p)
+        except InputError:  # not TOML: a scene file with an error, reported when read
+            data = None
+        if not (isinstance(data, dict) and set(data) == {"templates"}
+                and isinstance(data["templates"], dict)):
+            out.append(p)
+    return out
 
 
 def scene_from_dict(data, source: str = "<scene>") -> Scene:

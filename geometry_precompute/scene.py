@@ -36,26 +36,15 @@ from .settings import (
     Settings,
     flatten_settings,
 )
+from .template_files import BUILTIN_SET, TemplateSet, template_set
+from .template_files import builtin as builtin_templates
 
 OBJECT_KINDS = ("mug", "cup", "box", "mesh")
-TEMPLATE_OBJECTS = {
-    "side_grasp": ("mug", "cup", "mesh"),
-    "handle_grasp": ("cup",),
-    "top_grasp": ("mug", "cup", "box", "mesh"),
-    "drawer_pull": ("box",),
-}
-TEMPLATE_PARAMS = {
-    "side_grasp": ("radius",),
-    "handle_grasp": ("length", "half_angle"),
-    "top_grasp": ("radius",),
-    "drawer_pull": ("depth",),
-}
-TEMPLATE_FIXED = {
-    "side_grasp": ("height",),
-    "handle_grasp": (),
-    "top_grasp": ("thickness", "offset"),
-    "drawer_pull": ("width", "height"),
-}
+# The built-in templates' names, fits, shrinkable parameters and fixed dimensions
+# (geometry_precompute/builtin_templates.toml); a scene's own files add to them.
+TEMPLATE_OBJECTS = {n: t.fits for n, t in builtin_templates().items()}
+TEMPLATE_PARAMS = {n: t.param_names for n, t in builtin_templates().items()}
+TEMPLATE_FIXED = {n: t.fixed_names for n, t in builtin_templates().items()}
 # Objects interpenetrate when coal's signed distance between bodies is below this.
 INTERPENETRATION_TOL = 1e-6
 YAW_LIMIT = 1000.0  # rad; any angle is allowed, but not one whose cosine is rounding noise
@@ -127,6 +116,7 @@ class Scene:
     settings_overrides: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
     source: str = "<scene>"
+    templates: TemplateSet = BUILTIN_SET  # the built-in templates and the scene's files
 
     def object(self, object_id: str) -> SceneObject:
         for o in self.objects:
@@ -144,7 +134,7 @@ class Scene:
         return s
 
 
-_TOP_KEYS = {"name", "description", "objects", "tasks", "settings"}
+_TOP_KEYS = {"name", "description", "objects", "tasks", "settings", "templates"}
 _OBJECT_KEYS = {"id", "kind", "position", "yaw", "yaw_deg", "radius", "height", "half_extents",
                 "mesh", "scale"}
 # Spellings in degrees, converted on load: the field, and the radian field it stands for.
@@ -252,33 +242,36 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
     return SceneObject(oid, kind, position, yaw, radius=radius, height=height)
 
 
-def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) -> Task:
+def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject],
+                templates: TemplateSet = BUILTIN_SET) -> Task:
     where = f"tasks[{i}]."
     _check_keys(raw, _TASK_KEYS, {"id", "object", "template"}, src, where)
     tid = _string(raw["id"], src, where + "id")
     where = f"tasks[{tid}]."
     obj_id = _string(raw["object"], src, where + "object")
     template = raw["template"]
-    if not isinstance(template, str) or template not in TEMPLATE_OBJECTS:
+    if not isinstance(template, str) or template not in templates:
         raise InputError(src, where + "template", f"unknown template {shown(template)} "
-                         f"(known: {', '.join(TEMPLATE_OBJECTS)})")
+                         f"(known: {', '.join(templates.names())}; a scene adds its own "
+                         "with templates = [\"file.toml\"])")
     if obj_id not in objects:
         raise InputError(src, where + "object", f"no object with id {obj_id!r} in the scene")
     kind = objects[obj_id].kind
-    if kind not in TEMPLATE_OBJECTS[template]:
+    spec = templates[template]
+    if kind not in spec.fits:
         raise InputError(src, where + "template", f"{template} does not fit a {kind} "
-                         f"(fits: {', '.join(TEMPLATE_OBJECTS[template])})")
+                         f"(fits: {', '.join(spec.fits)})")
     bounds_raw = raw.get("bounds", {})
-    params = set(TEMPLATE_PARAMS[template])
-    _check_keys(bounds_raw, params | {k for k, v in DEG_FIELDS.items() if v in params}, set(),
-                src, where + "bounds.")
+    units = spec.units
+    deg = {f"{n}_deg": n for n, u in units.items() if u == "rad"}
+    _check_keys(bounds_raw, set(units) | set(deg), set(), src, where + "bounds.")
     bounds = {}
     for key, value in bounds_raw.items():
-        name = DEG_FIELDS.get(key, key)
+        name = deg.get(key, key)
         if key != name and name in bounds_raw:
             raise InputError(src, f"{where}bounds.{key}", f"give {name} (rad) or {key}, "
                              "not both")
-        if name == "half_angle":  # in radians, or in degrees as half_angle_deg
+        if units[name] == "rad":  # in radians, or in degrees as NAME_deg
             lo, hi = _vector(value, 2, src, f"{where}bounds.{key}")
             if key != name:
                 lo, hi = math.radians(lo), math.radians(hi)
@@ -294,7 +287,7 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject]) 
             raise InputError(src, f"{where}bounds.{key}", f"min {lo} > init {hi}")
         bounds[name] = (lo, hi)
     fixed_raw = raw.get("fixed", {})
-    _check_keys(fixed_raw, set(TEMPLATE_FIXED[template]), set(), src, where + "fixed.")
+    _check_keys(fixed_raw, set(spec.fixed_names), set(), src, where + "fixed.")
     fixed = {name: _number(v, src, f"{where}fixed.{name}", positive=True)
              for name, v in fixed_raw.items()}
     return Task(tid, obj_id, template, bounds, fixed)
@@ -322,9 +315,13 @@ def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
         if obj.id in objects:
             raise InputError(src, f"objects[{i}].id", f"duplicate object id {obj.id!r}")
         objects[obj.id] = obj
+    templates = BUILTIN_SET
+    if "templates" in data:
+        templates = template_set(data["templates"], src, "templates",
+                                 None if src.startswith("<") else Path(src).parent)
     tasks: dict[str, Task] = {}
     for i, raw in enumerate(raw_tasks):
-        task = _parse_task(raw, i, src, objects)
+        task = _parse_task(raw, i, src, objects, templates)
         if task.id in tasks:
             raise InputError(src, f"tasks[{i}].id", f"duplicate task id {task.id!r}")
         tasks[task.id] = task
@@ -334,7 +331,7 @@ def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
     settings_raw = flatten_settings(settings_raw, src, "settings.")  # bare dotted names too
     DEFAULTS.with_overrides(settings_raw, src, "settings.")  # validates every key and value
     scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), settings_raw,
-                  description, src)
+                  description, src, templates)
     return scene
 
 
@@ -387,6 +384,8 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
         if t.fixed:
             d["fixed"] = dict(t.fixed)
         tasks.append(d)
+    if scene.templates.files:
+        out["templates"] = list(scene.templates.files)
     out["objects"] = objs
     out["tasks"] = tasks
     if scene.settings_overrides:

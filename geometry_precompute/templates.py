@@ -1,24 +1,34 @@
 """Skill templates: from a task to its position space and orientation space.
 
-the scene format's table, with every default read from the settings and the
-task's own ``[tasks.bounds]`` / ``[tasks.fixed]`` taking precedence. A
-:class:`TaskSpace` knows its shrinkable parameters (names, min, init) and
-builds its :class:`~geometry_precompute.shapes.Shape` for any parameter
-vector, so Shrinking never needs to know which template it works on.
+A task names a template (:mod:`geometry_precompute.template_files`: the built-in file
+or the scene's own template files); :func:`resolve_task` evaluates the template's
+bounds and fixed dimensions for the task's object and settings, the task's own
+``[tasks.bounds]`` / ``[tasks.fixed]`` taking precedence. A :class:`TaskSpace` knows
+its shrinkable parameters (names, min, init) and builds its
+:class:`~geometry_precompute.shapes.Shape` for any parameter vector, so Shrinking never
+needs to know which template it works on.
+
+The object's frame: origin at the centre of the object's base (``SceneObject.base``),
+x along its yaw, z up. A point (lx, ly, lz) of that frame is, in the world,
+``(x + (c lx - s ly), y + (s lx + c ly), z + lz)`` with c, s the cosine and sine of
+the yaw: the order of operations the four built-in templates were written in.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
 from .errors import InputError
 from .frames import IDENTITY, quat_of_approach, quat_of_rotation, yaw_matrix
-from .scene import TEMPLATE_PARAMS, Scene, SceneObject, Task
+from .scene import Scene, SceneObject, Task
 from .settings import Settings
 from .shapes import Shape
+from .template_files import SHAPE_DIMS, Template, namespace, object_measures
 
 
 @dataclass(frozen=True)
@@ -43,11 +53,19 @@ class TaskSpace:
     fixed: dict[str, float]
     orientation: OrientationSpace
     pose_quat: tuple[float, float, float, float]  # the space's rotation; fixed by the template
+    spec: Template | None = None  # the template's definition (None only for hand-made spaces)
+    values: dict[str, float] | None = None  # the object's measures and settings it reads
+    aim: tuple[float, float, float] | None = None
 
     @property
     def aim_point(self) -> tuple[float, float, float]:
-        """Where a user aiming at the object steers (:func:`aim_point`)."""
-        return aim_point(self.template, self.obj, self.fixed)
+        """Where a user aiming at the object steers (``user_aim = "object"``): the
+        template's ``aim``, or its centre where it has none. The built-in templates':
+        the side grasp's point on the object's axis at half the space's height, the
+        handle grasp point g, the top centre of the object, the centre of the drawer's
+        face."""
+        assert self.aim is not None
+        return self.aim
 
     def shape(self, q: np.ndarray | None = None) -> Shape:
         q = self.q_init if q is None else np.asarray(q, dtype=np.float64)
@@ -55,127 +73,143 @@ class TaskSpace:
 
     def shape_of(self, q: tuple[float, ...]) -> Shape:
         """:meth:`shape` for a tuple of floats (Shrinking's inner loop)."""
-        return _build_shape(self.template, self.obj, q, self.fixed, self.pose_quat,
-                            self._fixed_center)
+        assert self.spec is not None
+        lx, ly, lz, d0, d1, d2 = self._local(*q)
+        center = self._fixed_center or to_world(self.obj, (lx, ly, lz))
+        return Shape(self.spec.shape, center, self.pose_quat, (d0, d1, d2))
+
+    @cached_property
+    def _local(self) -> Any:
+        """The template's function of the parameters: centre (object frame), dims."""
+        assert self.spec is not None
+        return eval(self.spec.shape_code, namespace({**(self.values or {}), **self.fixed}))
 
     @cached_property
     def _fixed_center(self) -> tuple[float, float, float] | None:
-        """The shape's centre where the parameters do not move it (all but the drawer)."""
-        if self.template == "drawer_pull":
+        """The shape's centre where the parameters do not move it (all but the drawer's)."""
+        assert self.spec is not None
+        if self.spec.center_moves:
             return None
-        return _build_shape(self.template, self.obj, self.q_init, self.fixed,
-                            self.pose_quat).center
+        return to_world(self.obj, self._local(*(float(v) for v in self.q_init))[:3])
 
 
-def aim_point(template: str, obj: SceneObject, fixed: dict) -> tuple[float, float, float]:
-    """Where a user who aims at the object steers for this template (``user_aim =
-    "object"``): the side grasp's point on the object's axis at half the space's height,
-    the handle grasp point g, the top centre of the object, the centre of the drawer's
-    face."""
-    x, y, z = obj.base  # the position, but for a mesh whose lowest point is off its origin
-    if template == "side_grasp":
-        return (x, y, z + fixed["height"] / 2)
-    if template == "handle_grasp":
-        g, _ = handle_point(obj, fixed["handle_offset"])
-        return (float(g[0]), float(g[1]), float(g[2]))
-    if template == "top_grasp":
-        return (x, y, z + obj.body_height)
-    ex, _, ez = obj.box_half_extents
-    return (x - np.cos(obj.yaw) * ex, y - np.sin(obj.yaw) * ex, z + ez)
+def _yaw_cs(obj: SceneObject) -> tuple[float, float]:
+    return float(np.cos(obj.yaw)), float(np.sin(obj.yaw))
 
 
-def handle_point(obj: SceneObject, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """The cup handle's grasp point g and direction u (reference/scenes)."""
-    u = np.array([np.cos(obj.yaw), np.sin(obj.yaw), 0.0])
-    g = np.asarray(obj.position) + (obj.body_radius + offset) * u \
-        + np.array([0, 0, obj.body_height / 2])
-    return g, u
+def to_world(obj: SceneObject, local) -> tuple[float, float, float]:
+    """A point of the object's frame in the world (the module's docstring)."""
+    lx, ly, lz = local
+    x, y, z = obj.base
+    c, s = _yaw_cs(obj)
+    return (x + (c * lx - s * ly), y + (s * lx + c * ly), z + lz)
 
 
-def _pose_quat(template: str, obj: SceneObject) -> tuple[float, float, float, float]:
-    if template == "handle_grasp":
-        return quat_of_approach((np.cos(obj.yaw), np.sin(obj.yaw), 0.0))
-    if template == "drawer_pull":
+def direction_to_world(obj: SceneObject, d) -> tuple[float, float, float]:
+    """A direction of the object's frame in the world."""
+    dx, dy, dz = d
+    c, s = _yaw_cs(obj)
+    return (c * dx - s * dy, s * dx + c * dy, dz)
+
+
+def _pose_quat(t: Template, obj: SceneObject) -> tuple[float, float, float, float]:
+    if t.rotation == "world":
+        return IDENTITY
+    if t.rotation == "object":
         return quat_of_rotation(yaw_matrix(obj.yaw))
-    return IDENTITY
+    return quat_of_approach(direction_to_world(obj, t.rotation))
 
 
-def _build_shape(template: str, obj: SceneObject, q, fixed: dict, pose_quat: tuple,
-                 center: tuple | None = None) -> Shape:
-    """The template's shape for parameters q; ``center``, when given, is its centre
-    (which q does not move, but for the drawer)."""
-    x, y, z = obj.base  # the position, but for a mesh whose lowest point is off its origin
-    if template == "side_grasp":
-        h = fixed["height"]
-        return Shape("cylinder", center or (x, y, z + h / 2), pose_quat, (float(q[0]), h, 0.0))
-    if template == "handle_grasp":
-        if center is None:
-            center = tuple(handle_point(obj, fixed["handle_offset"])[0])
-        return Shape("cone", center, pose_quat, (float(q[0]), float(q[1]), 0.0))
-    if template == "top_grasp":
-        center = center or (x, y, z + obj.body_height + fixed["offset"])
-        return Shape("disk", center, pose_quat, (float(q[0]), fixed["thickness"], 0.0))
-    # drawer_pull: the local -x face stays put, the far face moves with the depth.
-    ex, _, ez = obj.box_half_extents
-    depth = float(q[0])
-    c, s = np.cos(obj.yaw), np.sin(obj.yaw)
-    lx = -ex - depth / 2
-    center = (obj.position[0] + c * lx, obj.position[1] + s * lx, obj.position[2] + ez)
-    return Shape("box", center, pose_quat, (depth / 2, fixed["width"] / 2, fixed["height"] / 2))
+def _orientation(t: Template, obj: SceneObject) -> OrientationSpace:
+    if t.orientation == "point_to_axis":
+        return OrientationSpace("point_to_axis", quat_of_approach(
+            direction_to_world(obj, (1.0, 0.0, 0.0))), (obj.position[0], obj.position[1]))
+    return OrientationSpace("fixed", quat_of_approach(direction_to_world(obj, t.orientation)))
 
 
-def _template_values(template: str, obj: SceneObject, s: Settings) -> tuple[dict, dict]:
-    """(bounds {name: (min, init)}, fixed {name: value}) from the settings."""
-    if template == "side_grasp":
-        return ({"radius": (obj.body_radius + s["side_grasp.radius_margin"],
-                            s["side_grasp.radius_init"])},
-                {"height": obj.body_height + s["side_grasp.height_margin"]})
-    if template == "handle_grasp":
-        return ({"length": (s["handle_grasp.length_min"], s["handle_grasp.length_init"]),
-                 "half_angle": (s["handle_grasp.half_angle_min"],
-                                s["handle_grasp.half_angle_init"])},
-                {"handle_offset": s["handle_grasp.handle_offset"]})
-    if template == "top_grasp":
-        return ({"radius": (obj.body_radius + s["top_grasp.radius_margin"],
-                            s["top_grasp.radius_init"])},
-                {"thickness": s["top_grasp.thickness"], "offset": s["top_grasp.offset"]})
-    _, ey, ez = obj.box_half_extents
-    return ({"depth": (s["drawer_pull.depth_min"], s["drawer_pull.depth_init"])},
-            {"width": 2 * ey, "height": 2 * ez})
+def _values(t: Template, obj: SceneObject, s: Settings) -> dict[str, float]:
+    """The object's measures and the settings the template's expressions read."""
+    out: dict[str, float] = object_measures(obj)
+    for n in t.settings_read:
+        out[n] = float(s[n[len("settings__"):].replace("__", ".")])
+    return out
 
 
-def _orientation(template: str, obj: SceneObject, s: Settings) -> OrientationSpace:
-    if template == "side_grasp":
-        yaw_dir = (np.cos(obj.yaw), np.sin(obj.yaw), 0.0)
-        return OrientationSpace("point_to_axis", quat_of_approach(yaw_dir),
-                                (obj.position[0], obj.position[1]))
-    if template == "handle_grasp":
-        _, u = handle_point(obj, s["handle_grasp.handle_offset"])
-        return OrientationSpace("fixed", quat_of_approach(-u))
-    if template == "top_grasp":
-        return OrientationSpace("fixed", quat_of_approach((0.0, 0.0, -1.0)))
-    return OrientationSpace("fixed", quat_of_approach(yaw_matrix(obj.yaw)[:, 0]))
+def _check_space(scene: Scene, task: Task, t: Template, space: TaskSpace) -> None:
+    """The template's space for this object at both bounds: finite, with positive
+    dimensions and a cone's half angle below pi/2 (affine in the parameters, so then
+    everywhere between)."""
+    names = SHAPE_DIMS[t.shape]
+    for q, which in ((space.q_init, "init"), (space.q_min, "min")):
+        try:
+            local = space._local(*(float(v) for v in q))
+        except (ArithmeticError, ValueError) as e:
+            raise InputError(scene.source, f"tasks[{task.id}].template",
+                             f"{t.name}'s space cannot be evaluated for this object "
+                             f"({e})") from None
+        dims = local[3:3 + len(names)]
+        if not all(math.isfinite(v) for v in local):
+            raise InputError(scene.source, f"tasks[{task.id}].template",
+                             f"{t.name} gives a space that is not finite for this "
+                             f"{space.obj.kind} (at its parameters' {which})")
+        for name, v in zip(names, dims, strict=True):
+            if not v > 0:
+                raise InputError(scene.source, f"tasks[{task.id}].template",
+                                 f"{t.name} gives a {t.shape} {name} of {v:.4g} for this "
+                                 f"{space.obj.kind} (at its parameters' {which}); it must "
+                                 "be > 0")
+        if t.shape == "cone" and not dims[1] < math.pi / 2:
+            raise InputError(scene.source, f"tasks[{task.id}].template",
+                             "a cone's half angle must be below pi/2, got "
+                             f"{dims[1]:.4g} (at its parameters' {which})")
+
+
+def _run(code, ns: dict, scene: Scene, task: Task, fld: str) -> Any:
+    """A template's compiled expression evaluated (code checked by
+    :mod:`~geometry_precompute.template_files`: arithmetic and a few functions only);
+    arithmetic that fails for this object is an InputError naming the task."""
+    try:
+        return eval(code, ns)
+    except (ArithmeticError, ValueError) as e:
+        raise InputError(scene.source, f"tasks[{task.id}].template",
+                         f"{task.template}'s {fld} cannot be evaluated for this object "
+                         f"({e})") from None
 
 
 def resolve_task(scene: Scene, task: Task, settings: Settings) -> TaskSpace:
     obj = scene.object(task.object)
-    bounds, fixed = _template_values(task.template, obj, settings)
+    t = scene.templates[task.template]
+    values = _values(t, obj, settings)
+    ns = namespace(values)
+    bounds = {p.name: (_run(p.min.tree_code, ns, scene, task, f"params.{p.name}.min"),
+                       _run(p.init.tree_code, ns, scene, task, f"params.{p.name}.init"))
+              for p in t.params}
+    fixed = {n: _run(e.tree_code, ns, scene, task, f"fixed.{n}") for n, e in t.fixed}
     bounds.update(task.bounds)
     fixed.update(task.fixed)
-    names = TEMPLATE_PARAMS[task.template]
-    for name in names:
-        lo, hi = bounds[name]
+    names = t.param_names
+    for p in t.params:
+        lo, hi = bounds[p.name]
+        where = f"tasks[{task.id}].bounds.{p.name}"
         if not lo <= hi:
-            raise InputError(scene.source, f"tasks[{task.id}].bounds.{name}",
+            raise InputError(scene.source, where,
                              f"min {lo:.4g} > init {hi:.4g} for this {obj.kind} (the template "
                              "does not fit its object; set [tasks.bounds] or the settings)")
-        if name == "half_angle" and not hi < np.pi / 2:
-            raise InputError(scene.source, f"tasks[{task.id}].bounds.{name}",
-                             "a cone's half angle must be below pi/2")
+        if p.unit == "rad" and not (0 < lo and hi < math.pi / 2):
+            raise InputError(scene.source, where, f"an angle's bounds must lie in (0, pi/2), "
+                             f"got [{lo:.4g}, {hi:.4g}]")
+    for n, v in fixed.items():
+        if not (math.isfinite(v) and v >= 0):
+            raise InputError(scene.source, f"tasks[{task.id}].fixed.{n}",
+                             f"{t.name} gives {v:.4g} for this {obj.kind}; a fixed "
+                             "dimension must be finite and >= 0")
     q_min = np.array([bounds[n][0] for n in names])
     q_init = np.array([bounds[n][1] for n in names])
-    return TaskSpace(task, obj, task.template, names, q_min, q_init, fixed,
-                     _orientation(task.template, obj, settings), _pose_quat(task.template, obj))
+    aim = to_world(obj, _run(t.aim_code, namespace({**values, **fixed}), scene, task, "aim"))
+    space = TaskSpace(task, obj, task.template, names, q_min, q_init, fixed,
+                      _orientation(t, obj), _pose_quat(t, obj), t, values, aim)
+    _check_space(scene, task, t, space)
+    return space
 
 
 def resolve_tasks(scene: Scene, settings: Settings) -> list[TaskSpace]:

@@ -104,9 +104,18 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="as JSON (one object per setting)")
     c.set_defaults(func="settings_cmd:cmd_settings")
 
-    c = command("schema", "print the JSON Schema of a scene file or a sweep config "
-                "(for editors; docs/reference/scenes.md)")
-    c.add_argument("kind", choices=["scene", "sweep"])
+    c = command("templates", "list the skill templates a scene can use, with their "
+                "parameters and bounds (docs/reference/templates.md)")
+    c.add_argument("scene", nargs="?", type=_path, help="a scene: its template files too, and "
+                   "its tasks' bounds for their objects")
+    c.add_argument("--file", nargs="+", type=_path, metavar="TEMPLATES.toml",
+                   help="template files to list beside the built-in ones")
+    c.add_argument("--json", action="store_true", help="as JSON")
+    c.set_defaults(func="templates_cmd:cmd_templates")
+
+    c = command("schema", "print the JSON Schema of a scene file, a sweep config or a "
+                "template file (for editors; docs/reference/outputs.md)")
+    c.add_argument("kind", choices=["scene", "sweep", "templates"])
     c.set_defaults(func="schema_cmd:cmd_schema")
 
     c = command("precompute", "C, clusters and Shrinking of one scene")

@@ -49,6 +49,7 @@ import numpy as np
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
 from geometry_precompute.errors import shown
 from geometry_precompute.generate import MAX_TASKS
+from geometry_precompute.loading import scene_files
 from geometry_precompute.scene import Scene, read_toml, scene_to_dict
 from geometry_precompute.settings import INT32_MAX, flatten_settings
 
@@ -74,7 +75,7 @@ class SweepConfig:
         src = self.source
         if src["kind"] == "files":
             folder = self.base_dir / src["path"]
-            return [load_scene(p) for p in sorted(folder.glob("*.toml"))]
+            return [load_scene(p) for p in scene_files(folder)]
         return [random_scene(*self.random_ref(i)) for i in range(src["count"])]
 
     def random_ref(self, i: int) -> tuple:
@@ -94,7 +95,7 @@ class SweepConfig:
     def n_scenes(self) -> int:
         src = self.source
         return src["count"] if src["kind"] == "random" else \
-            len(list((self.base_dir / src["path"]).glob("*.toml")))
+            len(scene_files(self.base_dir / src["path"]))
 
     def max_tasks(self) -> int:
         """The most tasks (and objects) a scene of the source can have: a random
@@ -115,7 +116,7 @@ class SweepConfig:
 
     def resolved(self) -> dict:
         """Everything that decides the results, as plain data (and so the hash)."""
-        scenes = [scene_to_dict(s) for s in self.scenes()] if self.source["kind"] == "files" \
+        scenes = [_portable_scene(s) for s in self.scenes()] if self.source["kind"] == "files" \
             else None
         return {"name": self.name, "modes": list(self.modes), "chunk": self.chunk,
                 "source": _portable(self.source), "scene_files": scenes,
@@ -137,7 +138,24 @@ def _portable(source: dict) -> dict:
         if "files" in e:
             e = {**e, "files": [Path(f).name for f in e["files"]]}
         objects.append(e)
-    return {**source, "generator": {**source["generator"], "objects": objects}}
+    gen = {**source["generator"], "objects": objects}
+    if "template_files" in gen:  # by name: template_digest holds their content
+        gen["template_files"] = [Path(f).name for f in gen["template_files"]]
+    return {**source, "generator": gen}
+
+
+def _portable_scene(scene) -> dict:
+    """A scene file as the hash sees it: its mesh and template files by name and content
+    (a CRC-32 of each mesh, a digest of the templates' definitions), not by where they
+    lie on this machine."""
+    d = scene_to_dict(scene)
+    for o, od in zip(scene.objects, d["objects"], strict=True):
+        if o.mesh is not None:
+            od["mesh"] = [Path(o.mesh.path).name, o.mesh.digest]
+    if "templates" in d:
+        d["templates"] = [Path(f).name for f in d["templates"]]
+        d["template_digest"] = scene.templates.digest()
+    return d
 
 
 def installed_version() -> str:
@@ -225,7 +243,7 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         if not isinstance(path, str) or not (base_dir / path).is_dir():
             raise InputError(src, "source.path", f"must name a folder of scene files, got "
                              f"{shown(path)}")
-        if not list((base_dir / path).glob("*.toml")):
+        if not scene_files(base_dir / path):
             raise InputError(src, "source.path", f"no *.toml scene files in {shown(path)}")
         source_out = {"kind": "files", "path": path}
     else:
@@ -304,8 +322,10 @@ def _probe_scene(generator: dict | None = None) -> Scene:
                                              0.0], **size})
                 tasks += [{"id": f"{t}-{oid}", "object": oid, "template": t}
                           for t in e["templates"]]
-        return parse_scene({"name": "probe", "objects": objects, "tasks": tasks},
-                           "<generator>")
+        probe = {"name": "probe", "objects": objects, "tasks": tasks}
+        if generator.get("template_files"):
+            probe["templates"] = generator["template_files"]
+        return parse_scene(probe, "<generator>")
     return parse_scene({"name": "probe", "objects": [
         {"id": "mug", "kind": "mug", "position": [0.0, 0.0, 0.0]},
         {"id": "cup", "kind": "cup", "position": [0.0, 5.0, 0.0]}], "tasks": [

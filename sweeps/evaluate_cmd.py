@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from geometry_precompute import InputError
+from geometry_precompute.loading import scene_files as folder_scene_files
 from shacc_jax.types import OUTCOMES
 
 from .inputs import load_and_precompute
@@ -21,12 +22,13 @@ from .pipeline import evaluate_results, scene_json
 
 
 def scene_files(args: list[str]) -> list[Path]:
-    """Scene arguments as files: a folder stands for its ``*.toml`` files, sorted."""
+    """Scene arguments as files: a folder stands for its ``*.toml`` scene files, sorted
+    (less the template files beside them)."""
     out: list[Path] = []
     for a in args:
         p = Path(a)
         if p.is_dir():
-            found = sorted(p.glob("*.toml"))
+            found = folder_scene_files(p)
             if not found:
                 raise InputError(p, "<folder>", "holds no *.toml scene files")
             out += found

@@ -1,6 +1,7 @@
-"""``shacc schema scene|sweep``: the JSON Schema of a scene file or a sweep config,
-built from the loaders' own definitions (``geometry_precompute.file_schema`` for scenes
-and settings; the sweep config's keys and limits from ``sweeps.config``)."""
+"""``shacc schema scene|sweep|templates``: the JSON Schema of a scene file, a sweep
+config or a template file, built from the loaders' own definitions
+(``geometry_precompute.file_schema`` for scenes, settings and templates; the sweep
+config's keys and limits from ``sweeps.config``)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ LOADER_ONLY = [
     "the axes and [[points]] give at most 100 000 points",
     "every template of the settings fits the scenes' objects",
     "source.generator: ranges low <= high, templates that fit their entry's kind, fields "
-    "of the entry's kind only, a mesh folder that holds mesh files",
+    "of the entry's kind only, a mesh folder that holds mesh files, template files that "
+    "exist and are valid",
     "the rules of a scene's [settings] that a schema cannot state, for every value",
 ]
 
@@ -46,6 +48,9 @@ def _generator_schema() -> dict:
         "table": _vector(2, {"type": "number", "exclusiveMinimum": 0, "maximum": 20}),
         "sigma": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
         "gap": {"type": "number", "minimum": 0, "maximum": 1},
+        "template_files": {"type": "array", "items": {"type": "string", "minLength": 1},
+                           "description": "template files (relative to the config) whose "
+                           "templates the entries may name beside the built-in ones"},
         "objects": {"type": "array", "minItems": 1, "items": entry}},
         "additionalProperties": False}
 
@@ -90,8 +95,9 @@ def sweep_schema() -> dict:
 
 
 def cmd_schema(args) -> int:
-    from geometry_precompute.file_schema import scene_schema
+    from geometry_precompute.file_schema import scene_schema, templates_schema
 
-    schema = scene_schema() if args.kind == "scene" else sweep_schema()
+    schema = {"scene": scene_schema, "sweep": sweep_schema,
+              "templates": templates_schema}[args.kind]()
     print(json.dumps(schema, indent=1))
     return 0

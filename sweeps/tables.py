@@ -64,7 +64,8 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "task_id": ("string", "", "the task's id in the scene"),
         "object_id": ("string", "", "the id of the object it acts on"),
         "object_kind": ("string", "", "mug, cup, box or mesh"),
-        "template": ("string", "", "side_grasp, handle_grasp, top_grasp or drawer_pull"),
+        "template": ("string", "", "the template's name: side_grasp, handle_grasp, top_grasp, "
+                     "drawer_pull or one of a template file's"),
         "param_names": ("list<string>", "", "the shrinkable parameters, in order"),
         "q_min": ("list<float64>", "m or rad", "their lower bounds"),
         "q_init": ("list<float64>", "m or rad", "their initial values (upper bounds)"),

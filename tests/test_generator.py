@@ -116,7 +116,12 @@ def test_the_kitchen_config_and_its_hash(tmp_path):
     assert kinds == {"mesh", "mug", "cup", "box"}
     shutil.copytree(CONFIGS / "kitchen_meshes", tmp_path / "kitchen_meshes")
     shutil.copy(CONFIGS / "kitchen.toml", tmp_path / "kitchen.toml")
+    shutil.copy(CONFIGS / "kitchen_templates.toml", tmp_path / "kitchen_templates.toml")
     assert load_config(tmp_path / "kitchen.toml").hash() == cfg.hash()
+    mine = tmp_path / "kitchen_templates.toml"  # a template's definition is in the hash
+    mine.write_text(mine.read_text().replace("init = 0.25", "init = 0.24"))
+    assert load_config(tmp_path / "kitchen.toml").hash() != cfg.hash()
+    shutil.copy(CONFIGS / "kitchen_templates.toml", mine)
     (tmp_path / "kitchen_meshes" / "jar.stl").write_bytes(
         (tmp_path / "kitchen_meshes" / "bowl.stl").read_bytes())
     assert load_config(tmp_path / "kitchen.toml").hash() != cfg.hash()

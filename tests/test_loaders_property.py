@@ -87,6 +87,8 @@ def mutated(draw, doc):
     doc = copy.deepcopy(doc)
     for _ in range(draw(st.integers(1, 3))):
         spots = [p for p, _ in paths_of(doc) if p]
+        if not spots:  # everything deleted already
+            break
         path = draw(st.sampled_from(spots))
         parent = doc
         for key in path[:-1]:

@@ -40,10 +40,55 @@ def test_every_shipped_scene_validates(path):
     SCENE.validate(tomllib.loads(path.read_text()))
 
 
-@pytest.mark.parametrize("path", sorted((ROOT / "sweeps/configs").glob("*.toml"))
-                         + sorted((ROOT / "benchmarks").glob("*.toml")), ids=lambda p: p.stem)
+def _is_template_file(path: Path) -> bool:
+    return set(tomllib.loads(path.read_text())) == {"templates"}
+
+
+CONFIGS = sorted((ROOT / "sweeps/configs").glob("*.toml")) \
+    + sorted((ROOT / "benchmarks").glob("*.toml"))
+TEMPLATE_FILES = [ROOT / "geometry_precompute/builtin_templates.toml",
+                  *[p for p in CONFIGS if _is_template_file(p)]]
+
+
+@pytest.mark.parametrize("path", [p for p in CONFIGS if not _is_template_file(p)],
+                         ids=lambda p: p.stem)
 def test_every_shipped_config_validates(path):
     SWEEP.validate(tomllib.loads(path.read_text()))
+
+
+def test_template_files_validate_and_bad_ones_are_refused_by_both(capsys):
+    """The built-in and the shipped template files validate; every bad template file the
+    loader refuses, the schema refuses too, unless its rule is listed as loader-only."""
+    from test_template_files import BAD_FILES
+
+    from geometry_precompute.file_schema import TEMPLATE_LOADER_ONLY, templates_schema
+    from geometry_precompute.template_files import parse_file
+
+    schema = templates_schema()
+    jsonschema.Draft202012Validator.check_schema(schema)
+    assert main(["schema", "templates"]) == 0
+    assert json.loads(capsys.readouterr().out) == schema
+    validator = jsonschema.Draft202012Validator(schema)
+    assert len(TEMPLATE_FILES) >= 2
+    for path in TEMPLATE_FILES:
+        validator.validate(tomllib.loads(path.read_text()))
+    # A bad file's rule, and the words of the loader-only rule that covers it.
+    loader_only = {"not affine": "affine", "operator Pow": "expressions use",
+                   "may be called": "expressions use", "unknown measure": "object.<measure>",
+                   "a box's measure": "object.half_x", "not a geometry setting":
+                   "settings.<geometry setting>", "not an expression": "expressions use",
+                   "unknown name": "expressions use", "zero vector": "zero vector",
+                   "required": "aim is given"}
+    listed_rules = " ".join(TEMPLATE_LOADER_ONLY)
+    refused_by_schema_only_if_listed = 0
+    for doc, fld, rule in BAD_FILES:
+        with pytest.raises(InputError):
+            parse_file(doc, "mine.toml")
+        if validator.is_valid(doc):
+            words = [w for k, w in loader_only.items() if k in rule]
+            assert words and words[0] in listed_rules, (fld, rule, "the schema accepts it")
+            refused_by_schema_only_if_listed += 1
+    assert refused_by_schema_only_if_listed < len(BAD_FILES)
 
 
 BASE = {
