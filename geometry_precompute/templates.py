@@ -78,6 +78,16 @@ class TaskSpace:
         center = self._fixed_center or to_world(self.obj, (lx, ly, lz))
         return Shape(self.spec.shape, center, self.pose_quat, (d0, d1, d2))
 
+    def __getstate__(self) -> dict:
+        """Pickled without the compiled function of the parameters (a lambda, which
+        pickle refuses; it is compiled again where it is next needed)."""
+        state = dict(self.__dict__)
+        state.pop("_local", None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
     @cached_property
     def _local(self) -> Any:
         """The template's function of the parameters: centre (object frame), dims."""

@@ -319,3 +319,17 @@ def test_a_sweep_of_scene_files_hashes_their_templates_by_content(tmp_path):
     _scene(tmp_path / "b" / "scenes", changed)
     assert parse_config({"source": {"kind": "files", "path": "scenes"}}, "cfg.toml",
                         tmp_path / "b").hash() != hashes[0]
+
+
+def test_precomputed_scenes_pickle_with_plain_pickle(tmp_path):
+    """A precomputed scene whose spaces were built (the templates' functions compiled and
+    cached) pickles with the standard library's pickle, as a process pool sends it, and
+    comes back with the same shapes, for a built-in and a data-only template."""
+    import pickle
+
+    result = precompute(load_scene(_scene(tmp_path)))
+    assert all(sp.shape().dims for sp in result.spaces)  # builds and caches them
+    back = pickle.loads(pickle.dumps(result))
+    for a, b in zip(result.spaces, back.spaces, strict=True):
+        for q in (a.q_init, a.q_min):
+            assert a.shape(q) == b.shape(q)
