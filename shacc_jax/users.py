@@ -411,15 +411,23 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
     lo, hi = shapes.all_ray_intervals(spaces, s.p, along, n["grow"])
     enters = mask & (lo <= hi) & (lo <= seg_len) & (hi >= 0) & (seg_len > 0)
     # The intervals contain the spaces' tau-sublevel sets (a little more, near edges):
-    # from the first interval's start, sphere tracing (the sdf is 1-Lipschitz, so a
-    # step of min sdf - tau never passes an entry) reaches the first entry into any
-    # space.
+    # from the first interval's start, steps that never pass an entry reach the first
+    # entry into any space. Two such steps, the longer taken: sphere tracing's (the sdfs
+    # are 1-Lipschitz, so min sdf - tau) and each space's Newton step along the segment
+    # (its sdf is convex, so outside the tangent's root lies before its own entry: exact
+    # at once through a face, where sphere tracing alone crawls along a grazing
+    # segment, 1.3 mm short of a disk's top after 16 steps in a test).
     t_hit = jnp.min(jnp.where(enters, jnp.maximum(lo, 0.0), inf))
     t_hit = jnp.where(jnp.isfinite(t_hit), t_hit, 0.0)
 
+    def gaps(t):
+        return jnp.where(mask, shapes.all_sdf(spaces, s.p + t * along), inf) - tau
+
     def trace(_, t):
-        gap = jnp.min(jnp.where(mask, shapes.all_sdf(spaces, s.p + t * along), inf))
-        return t + jnp.maximum(gap - tau, 0.0)
+        gap, slope = jax.jvp(gaps, (t,), (jnp.ones_like(t),))
+        newton = jnp.where(gap <= 0, 0.0, jnp.where(slope < 0, gap / jnp.where(
+            slope < 0, -slope, 1.0), inf))
+        return t + jnp.maximum(jnp.maximum(jnp.min(gap), 0.0), jnp.min(newton))
 
     t_hit = jax.lax.fori_loop(0, SPHERE_TRACING_STEPS, trace, t_hit)
     p_hit = s.p + t_hit * along
