@@ -72,6 +72,8 @@ class BakedScenes:
     obj_center: np.ndarray
     obj_quat: np.ndarray
     obj_size: np.ndarray
+    obj_hull: np.ndarray
+    obj_hull_plane: np.ndarray
     scene_key: np.ndarray
     dt: np.ndarray
     v_max: np.ndarray
@@ -139,7 +141,9 @@ def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> Bake
     """Bakes of one shape (tasks, objects, starts) as one, scenes in order; ``pad_to``:
     that many scenes, the last repeated (a padded scene's results are dropped by who
     asked for it)."""
-    arrays = {k: np.concatenate([getattr(b, k) for b in bakes])
+    F = max(b.obj_hull.shape[2] for b in bakes)
+    arrays = {k: np.concatenate([_hull_rows(getattr(b, k), F) if k in _HULL_FIELDS
+                                 else getattr(b, k) for b in bakes])
               for k in GEOMETRY_FIELDS + PARAM_FIELDS + SEARCH_FIELDS}
     S = len(arrays["task_mask"])
     if pad_to is not None and pad_to > S:
@@ -150,6 +154,36 @@ def concatenate(bakes: Sequence[BakedScenes], pad_to: int | None = None) -> Bake
     labels.update({k: np.concatenate([b.labels[k] for b in bakes])
                    for k in ("C_init", "C_final")})
     return BakedScenes(**arrays, labels=labels)
+
+
+_HULL_FIELDS = ("obj_hull", "obj_hull_plane")
+
+
+def _hull_rows(a: np.ndarray, F: int) -> np.ndarray:
+    """A bake's hull array (S, O, F0, ...) with F rows per object, its triangles repeated
+    (each object's F0 rows are its hull's triangles, repeated already)."""
+    if a.shape[2] == F:
+        return a
+    if a.shape[2] == 0:
+        return np.zeros((*a.shape[:2], F, *a.shape[3:]))
+    return a[:, :, np.arange(F) % a.shape[2]]
+
+
+def hull_rows(n: int) -> int:
+    """The padded hull size F of a batch whose largest hull has n triangles: four sizes
+    per octave from 16 (at most 25 % more), so that a sweep's chunks mostly share one
+    program.
+
+    >>> [hull_rows(n) for n in (0, 4, 17, 284, 478, 968)]
+    [0, 16, 20, 320, 512, 1024]
+    """
+    if n <= 0:
+        return 0
+    size = 16
+    while size < n:
+        octave = 1 << (size.bit_length() - 1)
+        size += octave // 4
+    return size
 
 
 def is_horizontal_approach(q) -> bool:
@@ -236,6 +270,22 @@ def _check_quaternions(q: np.ndarray, source: str, fld: str) -> None:
         raise InputError(source, fld, "a zero quaternion is not a rotation")
 
 
+def _placed_hull(obj, center) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh object's hull (``mesh_objects.hull``) turned by its yaw and placed about
+    ``center``: triangles (F, 3, 3) and planes (F, 4), the offsets computed in float64
+    where they are placed."""
+    from .mesh_objects import hull
+
+    tri, normals = hull(obj.mesh)
+    c, s = np.cos(obj.yaw), np.sin(obj.yaw)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    offset = np.asarray(obj.position, float) - np.asarray(center, float)
+    tri = tri @ turn.T + offset
+    normals = normals @ turn.T
+    return tri, np.concatenate([normals, np.einsum("fi,fi->f", normals, tri[:, 0])[:, None]],
+                               axis=1)
+
+
 def scene_key(scene) -> int:
     """The scene's own number, in [0, 2^31): a CRC-32 of its name, objects and tasks.
     It keys the simulated users' random numbers (``shacc_jax.users``), so that a
@@ -252,7 +302,8 @@ def scene_key(scene) -> int:
 
 
 def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
-         starts: np.ndarray | None = None, max_objects: int | None = None) -> BakedScenes:
+         starts: np.ndarray | None = None, max_objects: int | None = None,
+         mesh_hulls: bool | None = None) -> BakedScenes:
     """Bake precomputed scenes into fixed-shape arrays, the one input of the JAX half.
 
     :param results: S precomputed scenes (:func:`precompute`).
@@ -261,6 +312,10 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         unit quaternion w first) instead of the settings' grid (quaternions are
         validated and normalised).
     :param max_objects: pad the object axis to at least this.
+    :param mesh_hulls: whether mesh objects get their collision slot and hull (None: in
+        the scenes whose ``collision`` is on). A sweep's points that differ only in
+        rollout settings share one geometry, so their bakes pass True where any of them
+        checks collisions.
     :returns: a :class:`BakedScenes` (``geometry_precompute/schema.py`` lists every
         array and its shape); ``shacc_jax.inputs`` splits it into Geometry, Params and
         Layout. A sweep's chunks share their padded shapes, so they share one program.
@@ -331,16 +386,14 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
     out["obj_center"] = np.zeros((S, O, 3))
     out["obj_quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (S, O, 1))
     out["obj_size"] = np.tile(_PAD_DIMS, (S, O, 1))
+    hulls: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
     for si, r in enumerate(results):
         s = r.settings
         for oi, obj in enumerate(r.scene.objects):
             body = object_body(obj)
-            if obj.mesh is not None:
-                if s["collision"] != "off":
-                    raise InputError(r.scene.source, "settings.collision", "collision checks "
-                                     f"against mesh objects (objects[{obj.id}]) are not "
-                                     "available yet; set collision = \"off\"")
-                continue  # not collided with: no slot
+            if obj.mesh is not None and not (s["collision"] != "off" if mesh_hulls is None
+                                             else mesh_hulls):
+                continue  # not collided with: no slot (nor a hull to carry)
             out["obj_mask"][si, oi] = True
             out["obj_center"][si, oi] = body.center
             out["obj_quat"][si, oi] = body.quat
@@ -349,6 +402,18 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
                 out["obj_size"][si, oi] = body.dims
             else:
                 out["obj_size"][si, oi] = (body.dims[0], body.dims[1] / 2, 0.0)
+            if obj.mesh is not None:  # its hull, checked exactly; bounded by that cylinder
+                out["obj_kind"][si, oi] = schema.MESH
+                hulls[si, oi] = _placed_hull(obj, body.center)
+    F = hull_rows(max((len(t) for t, _ in hulls.values()), default=0))
+    out["obj_hull"] = np.zeros((S, O, F, 3, 3))
+    out["obj_hull_plane"] = np.zeros((S, O, F, 4))
+    for (si, oi), (tri, plane) in hulls.items():
+        pad = np.arange(F) % len(tri)  # repeating its triangles changes no distance
+        out["obj_hull"][si, oi] = tri[pad]
+        out["obj_hull_plane"][si, oi] = plane[pad]
+    for si, r in enumerate(results):
+        s = r.settings
         params["collision"][si] = s["collision"] == "on"
         for k in schema.GRIPPER:
             params[k][si] = s[k.replace("gripper_", "gripper.")]

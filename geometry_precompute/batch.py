@@ -79,8 +79,11 @@ def bake_batch(got: list[tuple[PrecomputeResult, bool]], points: list[dict], tas
     bake at the sweep's sizes (``settings``: :func:`point_settings` of ``points``)."""
     t0 = time.perf_counter()
     settings = settings or point_settings(points)
+    # The points share one geometry: mesh hulls in all where any point checks collisions.
+    hulls = any(settings(r.scene, k)["collision"] != "off" for r, _ in got
+                for k in range(len(points)))
     bakes = [bake([replace(r, settings=settings(r.scene, k)) for r, _ in got], tasks,
-                  max_objects=objects) for k in range(len(points))]
+                  max_objects=objects, mesh_hulls=hulls) for k in range(len(points))]
     results = [r for r, _ in got]
     hits = sum(hit for _, hit in got)
     return Batch(bakes, scene_labels(results), len(got) - hits, hits,

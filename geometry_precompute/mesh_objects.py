@@ -134,6 +134,34 @@ def load(written: str, scale: float, source: str, where: str) -> MeshInfo:
     return info
 
 
+# Hull triangles smaller than this (m^2) are dropped: their plane is rounding noise, and
+# their neighbours' edges and faces bound the hull where they were.
+MIN_HULL_TRIANGLE = 1e-14
+_HULLS: dict[tuple[int, float], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def hull(info: MeshInfo) -> tuple[np.ndarray, np.ndarray]:
+    """The convex hull of the mesh's solid, in the mesh's frame (scaled, m), as the
+    collision check takes it (MuJoCo too collides with a mesh's convex hull): triangles
+    (F, 3, 3), counter-clockwise seen from outside, and their outward unit normals
+    (F, 3). Computed once per mesh file and scale (qhull, through trimesh)."""
+    key = (info.digest, info.scale)
+    if key not in _HULLS:
+        import trimesh
+
+        assert info.vertices is not None  # load() keeps them
+        h = trimesh.convex.convex_hull(info.vertices)
+        tri = np.asarray(h.triangles, float)
+        normals = np.asarray(h.face_normals, float)
+        # trimesh winds a hull's faces outward; the check relies on it.
+        turn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(turn, axis=1)
+        assert np.all(np.einsum("fi,fi->f", turn, normals) >= 0)
+        keep = area > MIN_HULL_TRIANGLE
+        _HULLS[key] = (tri[keep], normals[keep])
+    return _HULLS[key]
+
+
 def solid(info: MeshInfo, position, yaw: float):
     """The object's solid (the mesh, or its convex hull) as a trimesh in the world frame:
     scaled, turned by ``yaw`` about the vertical axis through its origin, moved to

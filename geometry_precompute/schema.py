@@ -40,6 +40,9 @@ INVALID = -1  # the rollout's intended task is a padded (masked) task
 KINDS = ("cylinder", "disk", "cone", "box")
 CYLINDER, DISK, CONE, BOX = range(4)
 KIND_CODES = {name: i for i, name in enumerate(KINDS)}
+# An object's body may also be a mesh's convex hull (obj_hull), with its bounding upright
+# cylinder in obj_size: everything that bounds a body treats it as that cylinder.
+MESH = 4
 # Orientation-space kinds (reference/scenes, templates).
 ORIENT_KINDS = ("fixed", "point_to_axis")
 FIXED, POINT_TO_AXIS = range(2)
@@ -78,12 +81,21 @@ GEOMETRY = (
     Field("starts", ("S", "N", 7), "float", "start poses [x, y, z, qw, qx, qy, qz]"),
     Field("start_index", ("S", "N"), "int", "each start's index in the scene's whole start "
           "grid (a piece of the grid keeps it): keys the simulated users' random numbers"),
-    Field("obj_mask", ("S", "O"), "bool", "True for a real object"),
-    Field("obj_kind", ("S", "O"), "int", "object body kind (KINDS): cylinder or box"),
-    Field("obj_center", ("S", "O", 3), "float", "the object body's centre"),
+    Field("obj_mask", ("S", "O"), "bool", "True for a real object (checked for collisions)"),
+    Field("obj_kind", ("S", "O"), "int", "object body kind (KINDS): cylinder or box; MESH "
+          "(4) for a mesh's convex hull"),
+    Field("obj_center", ("S", "O", 3), "float", "the object body's centre (a mesh: its "
+          "bounding upright cylinder's)"),
     Field("obj_quat", ("S", "O", 4), "float", "its rotation (w, x, y, z)"),
     Field("obj_size", ("S", "O", 3), "float",
-          "MuJoCo geom size: cylinder (r, half height, 0), box half extents"),
+          "MuJoCo geom size: cylinder (r, half height, 0), box half extents; a mesh: its "
+          "bounding upright cylinder's (r, half height, 0)"),
+    Field("obj_hull", ("S", "O", "F", 3, 3), "float", "a mesh object's convex hull: its "
+          "triangles' corners in the object's frame (about obj_center), counter-clockwise "
+          "seen from outside; padded by repeating a triangle. F is 0 where no scene of the "
+          "batch checks collisions with a mesh"),
+    Field("obj_hull_plane", ("S", "O", "F", 4), "float", "each hull triangle's outward "
+          "unit normal and offset b: the hull is n . x <= b"),
     Field("scene_key", ("S",), "int", "the scene's own number (a digest of its content, "
           "in [0, 2^31)): keys the simulated users' random numbers, whatever the batch"),
 )

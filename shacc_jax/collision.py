@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from geometry_precompute.schema import BOX
+from geometry_precompute.schema import BOX, MESH
 
 from . import automaton as am
 from . import quaternion as quat
@@ -138,20 +138,155 @@ def pair_axes(objects, p: Float[Array, "3"], q: Float[Array, "4"],
     return a_loc, d_loc, radii
 
 
-def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"],
-            dims: Float[Array, "4"]) -> Array:
+class Hulls(NamedTuple):
+    """The convex hulls of a batch's mesh objects (``Geometry.obj_hull`` and
+    ``obj_hull_plane``): triangles (S, O, F, 3, 3), corners counter-clockwise seen from
+    outside, and their planes (S, O, F, 4) (outward unit normal, offset), in each
+    object's frame. F is 0 where no scene of the batch checks collisions against a
+    mesh; a primitive object's rows are padding."""
+
+    tri: Float[Array, "S O F 3 3"]
+    plane: Float[Array, "S O F 4"]
+
+    @classmethod
+    def of(cls, geometry) -> Hulls | None:
+        """The batch's hulls, or None where it has none (decided by the static F)."""
+        if geometry.obj_hull.shape[2] == 0:
+            return None
+        return cls(geometry.obj_hull, geometry.obj_hull_plane)
+
+
+def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"], dims: Float[Array, "4"],
+            hulls: Hulls | None = None, scene=None, cutoff: float | None = None) -> Array:
     """Smallest (capsule axis to object distance - capsule radius) over the gripper's
     capsules and the scene's objects (``scene_objects``' output), at the EE pose (p, q).
     Where a capsule and an object are apart this is their distance, as CPU MuJoCo's
     ``mj_geomDistance`` reports it; where they overlap it is at most minus the depth
     of the overlap's smallest separating move short of the capsule radius, and it is
     below -eps exactly when MuJoCo's penetration depth exceeds eps (a capsule overlaps
-    a convex body by more than eps iff its axis comes within radius - eps of it)."""
+    a convex body by more than eps iff its axis comes within radius - eps of it).
+
+    A mesh object (``hulls``, the batch's, and ``scene``, this scene's index in it) is
+    its convex hull (:func:`hull_distance`). Its bounding cylinder's distance bounds the
+    hull's from below, and only pairs whose bound lies below ``cutoff`` (default:
+    -eps, where a pair can decide a penetration) are measured exactly, one pair per
+    round of a loop that ends when no pair is left; the others count with their
+    bound."""
     kind, _, _, size, mask = objects
     a_loc, d_loc, radius = pair_axes(objects, p, q, dims)
     dist = segment_distance(a_loc, d_loc, kind[None, :], size[None, :, :])
     gap = dist - radius[:, None]
+    if hulls is not None:
+        gap = _hull_gaps(hulls, scene, kind, mask, a_loc, d_loc, radius, gap,
+                         -PENETRATION_EPS if cutoff is None else cutoff)
     return jnp.min(jnp.where(mask[None, :], gap, jnp.inf))
+
+
+def _hull_gaps(hulls: Hulls, scene, kind, mask, a_loc, d_loc, radius, gap, cutoff):
+    """``gap`` (capsules, objects) with the mesh pairs below ``cutoff`` measured exactly
+    (:func:`deepest`)."""
+    O = gap.shape[1]
+    todo = ((kind == MESH) & mask)[None, :] & (gap < cutoff)
+    order = jnp.argsort(~todo.reshape(-1), stable=True)
+    count = jnp.sum(todo)
+
+    def body(state):
+        i, out = state
+        c, o = order[i] // O, order[i] % O
+        exact = hull_distance(hulls.tri[scene, o], hulls.plane[scene, o], a_loc[c, o],
+                              d_loc[c, o]) - radius[c]
+        return i + 1, out.at[c, o].set(exact)
+
+    return jax.lax.while_loop(lambda state: state[0] < count, body,
+                              (jnp.zeros((), count.dtype), gap))[1]
+
+
+def _clip_meets(alpha, beta, axis: int = -1):
+    """Whether some t in [0, 1] satisfies every alpha + t beta <= 0 along ``axis`` (a
+    segment against an intersection of half-spaces: Cyrus and Beck's clipping)."""
+    tiny = 1e-30
+    inf = jnp.asarray(jnp.inf, alpha.dtype)
+    enter, leave = beta < -tiny, beta > tiny
+    t = -alpha / jnp.where(enter | leave, beta, 1.0)
+    lo = jnp.maximum(jnp.max(jnp.where(enter, t, -inf), axis=axis), 0.0)
+    hi = jnp.minimum(jnp.min(jnp.where(leave, t, inf), axis=axis), 1.0)
+    never = jnp.any(~(enter | leave) & (alpha > 0), axis=axis)
+    return (lo <= hi) & ~never
+
+
+def _segment_segment_sq(a, d, p, e):
+    """Squared distance between segments a + s d and p + t e (s, t in [0, 1]), written
+    out over the last axis (3) so that it broadcasts and fuses (Ericson, Real-Time
+    Collision Detection, 5.1.9: the closest points of the lines, clamped to the
+    segments; neither segment may be a point)."""
+    r = tuple(ai - pi for ai, pi in zip(a, p, strict=True))
+    dd = sum(di * di for di in d)
+    ee = sum(ei * ei for ei in e)
+    de = sum(di * ei for di, ei in zip(d, e, strict=True))
+    dr = sum(di * ri for di, ri in zip(d, r, strict=True))
+    er = sum(ei * ri for ei, ri in zip(e, r, strict=True))
+    denom = dd * ee - de * de
+    # Near-parallel lines: any s will do, and 0 is as good as any.
+    ok = denom > 1e-7 * dd * ee
+    s = jnp.where(ok, jnp.clip((de * er - dr * ee) / jnp.where(ok, denom, 1.0), 0.0, 1.0), 0.0)
+    t = (de * s + er) / ee
+    s = jnp.where(t < 0, jnp.clip(-dr / dd, 0.0, 1.0),
+                  jnp.where(t > 1, jnp.clip((de - dr) / dd, 0.0, 1.0), s))
+    t = jnp.clip(t, 0.0, 1.0)
+    gap = [ri + s * di - t * ei for ri, di, ei in zip(r, d, e, strict=True)]
+    return gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2]
+
+
+def hull_distance(tri: Float[Array, "F 3 3"], plane: Float[Array, "F 4"], a: Float[Array, "3"],
+                  d: Float[Array, "3"]) -> Array:
+    """Euclidean distance from the segment a + t d, t in [0, 1], to a convex hull (0 where
+    they meet), in the hull's frame. The hull is given by its triangles ``tri``
+    (corners counter-clockwise seen from outside) and their planes ``plane`` (outward
+    unit normal n and offset b: the hull is every n . x <= b).
+
+    Exact: the segment meets the hull where clipping it by the planes leaves a piece
+    (Cyrus and Beck); else the closest points of the two are a point of the segment
+    and a point of a hull edge (segment to segment), or an end of the segment and a
+    point inside a face (the end's projection on the face's plane lies inside the
+    triangle); a closest point inside both the segment and a face needs the segment
+    parallel to the face, and then an end or an edge is as close. Padding triangles
+    repeat a real one. (MuJoCo takes a mesh's convex hull for its collisions too, and
+    its ``mj_geomDistance`` is the reference in the tests.)
+
+    >>> import jax.numpy as jnp
+    >>> import numpy as np, trimesh
+    >>> box = trimesh.creation.box((0.2, 0.2, 0.2))
+    >>> tri = jnp.asarray(box.triangles, jnp.float32)
+    >>> plane = jnp.asarray(np.c_[box.face_normals, (box.face_normals * box.triangles[:, 0])
+    ...                     .sum(1)], jnp.float32)
+    >>> a, d = jnp.array([0.3, 0.3, 0.0]), jnp.array([0.0, 0.0, 0.05])
+    >>> round(float(hull_distance(tri, plane, a, d)), 4)  # sqrt(0.2^2 + 0.2^2)
+    0.2828
+    """
+    n = tuple(plane[:, i] for i in range(3))
+    b = plane[:, 3]
+    av, dv = tuple(a[i] for i in range(3)), tuple(d[i] for i in range(3))
+    sa = n[0] * av[0] + n[1] * av[1] + n[2] * av[2] - b  # (F,): the planes at a
+    sd = n[0] * dv[0] + n[1] * dv[1] + n[2] * dv[2]
+    meets = _clip_meets(sa, sd, axis=0)
+    v = [tuple(tri[:, k, i] for i in range(3)) for k in range(3)]
+    inf = jnp.asarray(jnp.inf, a.dtype)
+    best = inf
+    inside = [jnp.ones_like(b, bool), jnp.ones_like(b, bool)]  # each end over each face
+    ends = (av, tuple(ai + di for ai, di in zip(av, dv, strict=True)))
+    for k in range(3):
+        p, q = v[k], v[(k + 1) % 3]
+        e = tuple(qi - pi for qi, pi in zip(q, p, strict=True))
+        best = jnp.minimum(best, jnp.min(_segment_segment_sq(av, dv, p, e)))
+        # The side plane through this edge, outward from the triangle: e x n.
+        m = (e[1] * n[2] - e[2] * n[1], e[2] * n[0] - e[0] * n[2], e[0] * n[1] - e[1] * n[0])
+        for j, x in enumerate(ends):
+            side = sum(mi * (xi - pi) for mi, xi, pi in zip(m, x, p, strict=True))
+            inside[j] = inside[j] & (side <= 0)
+    for j, x in enumerate(ends):
+        h = n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - b
+        best = jnp.minimum(best, jnp.min(jnp.where(inside[j] & (h >= 0), h * h, inf)))
+    return jnp.where(meets, 0.0, jnp.sqrt(best))
 
 
 def lower_bound(a, d, kind, size):
@@ -253,23 +388,27 @@ ROUND_SHARE = 32
 
 
 def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"],
-                      dims: Float[Array, "B 4"], live: Bool[Array, "B W"]) -> Int[Array, " B"]:
+                      dims: Float[Array, "B 4"], live: Bool[Array, "B W"],
+                      hulls: Hulls | None = None, ids=None) -> Int[Array, " B"]:
     """The first of W poses of each of B lanes at which the gripper penetrates an object
     by more than eps (W for none), as :func:`penetrates` decides pose by pose, among the
     poses where ``live`` (``objects``: each lane's scene, :func:`scene_objects`' output
-    with a leading B axis).
+    with a leading B axis; ``hulls`` and ``ids``, the lanes' scenes (B,) and objects'
+    indices (B, O) in them, where some object is a mesh).
 
     Per (pose, capsule, object) pair, in one fused pass: the closed-form
     :func:`lower_bound` clears most pairs, and an upper bound (the distance of the axis'
-    ends and middle to the object) settles the pairs that surely penetrate. Only the
-    pairs between the two, at poses before the lane's first sure penetration, are
-    searched exactly: numbered (a running count over the poses, then over each pose's
-    pairs), gathered into rounds of 1/ROUND_SHARE of all pairs, as many rounds as they
-    need. (Looking each round's pairs up by a binary search of the running count
-    instead of scattering them was slower on an H100: benchmarks/RESULTS.md.)"""
+    ends and middle to the object) settles the pairs that surely penetrate (not for a
+    mesh, whose bound is its bounding cylinder's). Only the pairs between the two, at
+    poses before the lane's first sure penetration, are searched exactly: numbered (a
+    running count over the poses, then over each pose's pairs), gathered into rounds of
+    1/ROUND_SHARE of all pairs, as many rounds as they need; a mesh's pairs get rounds
+    of their own (:func:`hull_distance`). (Looking each round's pairs up by a binary
+    search of the running count instead of scattering them was slower on an H100:
+    benchmarks/RESULTS.md.)"""
     kind, centre, mat, size, mask = objects
     B, W = live.shape
-    C, O = 3, kind.shape[1]
+    O = kind.shape[1]
     # Poses (B, W, 1) against objects (B, 1, O), component by component: one fused kernel
     # from the poses to the flags, no (..., 3) intermediate written to memory.
     pose_axes = capsule_axes(p[:, :, None, :], q[:, :, None, :], dims[:, None, None, :])
@@ -277,6 +416,7 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
     o_mat, o_kind = mat[:, None], kind[:, None, :]
     o_size = tuple(size[:, None, :, i] for i in range(3))
     near = live[:, :, None] & mask[:, None, :]
+    solid = o_kind != MESH  # the bounds are a mesh's bounding cylinder's
     maybe, sure = [], jnp.zeros((B, W), bool)
     for start, extent, radius in pose_axes:
         a = _in_frame_xyz(o_mat, tuple(s - c for s, c in zip(start, o_centre, strict=True)))
@@ -288,13 +428,50 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
         for t in (0.5, 1.0):
             upper = jnp.minimum(upper, point_distance(
                 tuple(ai + t * di for ai, di in zip(a, d, strict=True)), o_kind, o_size))
-        sure = sure | jnp.any(near & (upper < thr), axis=2)
+        sure = sure | jnp.any(near & solid & (upper < thr), axis=2)
     first_sure = jnp.where(jnp.any(sure, axis=1), jnp.argmax(sure, axis=1), W)
     # Only poses before the lane's first sure penetration can decide its first one.
     before_sure = jnp.arange(W)[None, :] < first_sure[:, None]
-    flags = [(f & before_sure[:, :, None]).reshape(B * W, O) for f in maybe]
+    flags = [f & before_sure[:, :, None] for f in maybe]
+    flat_p, flat_q = p.reshape(B * W, 3), q.reshape(B * W, 4)
+
+    def pair_axis(i):
+        """Pair i's pose, capsule and object, and the capsule's axis in its frame."""
+        pose, pair = i // (3 * O), i % (3 * O)
+        lane, c, o = pose // W, pair // O, pair % O
+        o_centre, o_mat = centre[lane, o], mat[lane, o]
+        starts, extents, radii = capsule_segments(flat_p[pose], flat_q[pose], dims[lane])
+        return (pose, lane, o, _into_frames(o_mat, starts[c] - o_centre),
+                _into_frames(o_mat, extents[c]), radii[c])
+
+    def solid_pair(i):
+        pose, lane, o, a_loc, d_loc, radius = pair_axis(i)
+        dist = segment_distance(a_loc, d_loc, kind[lane, o], size[lane, o])
+        return pose, dist < radius - PENETRATION_EPS
+
+    hit = _searched(flags if hulls is None else [f & solid for f in flags], solid_pair, B * W)
+    if hulls is not None:
+        scene, obj = ids
+
+        def mesh_pair(i):
+            pose, lane, o, a_loc, d_loc, radius = pair_axis(i)
+            s, k = scene[lane], obj[lane, o]
+            dist = hull_distance(hulls.tri[s, k], hulls.plane[s, k], a_loc, d_loc)
+            return pose, dist < radius - PENETRATION_EPS
+
+        hit = hit | _searched([f & ~solid for f in flags], mesh_pair, B * W)
+    hit = hit.reshape(B, W) & before_sure
+    return jnp.where(jnp.any(hit, axis=1), jnp.argmax(hit, axis=1), first_sure)
+
+
+def _searched(flags, one_pair, n_poses: int) -> Array:
+    """Which of n_poses poses have a pair that ``one_pair`` finds penetrating, among the
+    pairs ``flags`` (per capsule, (B, W, O)) marks: numbered by a running count over the
+    poses and each pose's pairs, and gathered into rounds of K pairs."""
+    O = flags[0].shape[-1]
+    flags = [f.reshape(n_poses, O) for f in flags]
     # The running count within each pose, written out over its C x O pairs (no scan).
-    within, total = [], jnp.zeros(B * W, jnp.int32)
+    within, total = [], jnp.zeros(n_poses, jnp.int32)
     for f in flags:
         for o in range(O):
             total = total + f[:, o].astype(jnp.int32)
@@ -307,17 +484,6 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
     n = candidate.shape[0]
     K = max(1, -(-n // ROUND_SHARE))
     rounds = (before[-1] + count[-1] + K - 1) // K
-    flat_p, flat_q = p.reshape(B * W, 3), q.reshape(B * W, 4)
-
-    def one_pair(i):
-        pose, pair = i // (C * O), i % (C * O)
-        lane, c, o = pose // W, pair // O, pair % O
-        o_kind, o_centre, o_mat, o_size, _ = (x[lane, o] for x in objects)
-        starts, extents, radii = capsule_segments(flat_p[pose], flat_q[pose], dims[lane])
-        a_loc = _into_frames(o_mat, starts[c] - o_centre)
-        d_loc = _into_frames(o_mat, extents[c])
-        dist = segment_distance(a_loc, d_loc, o_kind, o_size)
-        return pose, dist < radii[c] - PENETRATION_EPS
 
     def one_round(j, hit):
         slot = rank - j * K
@@ -325,24 +491,24 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
         idx = jnp.full(K, n, jnp.int32).at[jnp.where(take, slot, K)].set(
             jnp.arange(n, dtype=jnp.int32), mode="drop")
         pose, pen = jax.vmap(one_pair)(jnp.minimum(idx, n - 1))
-        return hit.at[jnp.where(idx < n, pose, B * W)].max(pen, mode="drop")
+        return hit.at[jnp.where(idx < n, pose, n_poses)].max(pen, mode="drop")
 
-    hit = jax.lax.fori_loop(0, rounds, one_round, jnp.zeros(B * W, bool))
-    hit = hit.reshape(B, W) & before_sure
-    return jnp.where(jnp.any(hit, axis=1), jnp.argmax(hit, axis=1), first_sure)
+    return jax.lax.fori_loop(0, rounds, one_round, jnp.zeros(n_poses, bool))
 
 
 class LaneObjects(NamedTuple):
     """What the lane pass's collision step reads (:func:`lane_objects`): every scene's
     objects (:func:`scene_objects`, leading axis S), the gripper's sizes (S, 4), each
     lane's touchable objects first, in object order and padded to whole groups of
-    ``per_group`` (L, G per_group), and how many each lane can touch (L,)."""
+    ``per_group`` (L, G per_group), how many each lane can touch (L,), and the mesh
+    objects' hulls (None without any)."""
 
     objects: tuple
     gripper: Float[Array, "S 4"]
     order: Int[Array, "L GJ"]
     n_touch: Int[Array, " L"]
     per_group: int
+    hulls: Hulls | None = None
 
     @property
     def groups(self) -> int:
@@ -352,7 +518,8 @@ class LaneObjects(NamedTuple):
 
 def lane_objects(geometry, params, touch: Bool[Array, "L O"]) -> LaneObjects:
     """:class:`LaneObjects` of a batch whose lanes can touch the objects ``touch``
-    (each lane's collision window, :func:`path_window`). Most lanes can touch at most
+    (each lane's collision window, :func:`path_window`), with the batch's mesh hulls
+    where it has any. Most lanes can touch at most
     OBJECT_SLOTS objects and are checked once; a lane that can touch more is checked
     once per group of them, and the group that collides first decides."""
     L, O = touch.shape
@@ -362,7 +529,8 @@ def lane_objects(geometry, params, touch: Bool[Array, "L O"]) -> LaneObjects:
         g.obj_kind, g.obj_center, g.obj_quat, g.obj_size, g.obj_mask))(geometry)
     order = jnp.argsort(~touch, axis=1, stable=True)
     order = jnp.concatenate([order, jnp.zeros((L, G * J - O), order.dtype)], axis=1)
-    return LaneObjects(objects, params.gripper(), order, jnp.sum(touch, axis=1), J)
+    return LaneObjects(objects, params.gripper(), order, jnp.sum(touch, axis=1), J,
+                       Hulls.of(geometry))
 
 
 def block_first_penetration(lane_obj: LaneObjects, scene: Int[Array, " B"],
@@ -379,11 +547,14 @@ def block_first_penetration(lane_obj: LaneObjects, scene: Int[Array, " B"],
     rank = group * J + jnp.arange(J)
     picked = [x[scene[:, None], take] for x in (kind, centre, mat, size)]
     reachable = mask[scene[:, None], take] & (rank[None, :] < lane_obj.n_touch[idx][:, None])
-    return first_penetration((*picked, reachable), p, q, lane_obj.gripper[scene], valid)
+    return first_penetration((*picked, reachable), p, q, lane_obj.gripper[scene], valid,
+                             lane_obj.hulls, (scene, take))
 
 
-def penetrates(objects, p, q, dims) -> Bool[Array, ""]:
-    return deepest(objects, p, q, dims) < -PENETRATION_EPS
+def penetrates(objects, p, q, dims, hulls: Hulls | None = None, scene=None) -> Bool[Array, ""]:
+    """Whether the gripper at (p, q) penetrates an object by more than eps
+    (:func:`deepest`)."""
+    return deepest(objects, p, q, dims, hulls, scene) < -PENETRATION_EPS
 
 
 def _line_sphere(u, c, rho):

@@ -114,6 +114,8 @@ class Geometry(NamedTuple):
     obj_center: Float[Array, "S O 3"]
     obj_quat: Float[Array, "S O 4"]
     obj_size: Float[Array, "S O 3"]
+    obj_hull: Float[Array, "S O F 3 3"]
+    obj_hull_plane: Float[Array, "S O F 4"]
     scene_key: Int[Array, " S"]
 
     @classmethod

@@ -334,14 +334,15 @@ def _move(lane: _Lane, s: _State) -> _Move:
 
 def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r: Array,
            track: bool, formula: str, swept_checks: bool, collide: bool,
-           step=None) -> _Check:
+           step=None, hulls: col.Hulls | None = None) -> _Check:
     """The full check at the gripper position p (one lane): every space's sdf and the
     activation; with ``step`` (the state before and the move), the swept check's entry
     point (traced only where ``swept_checks``) and the meta skill's turn of R. With
     ``collide`` (traced only where some scene checks collisions), the gripper's
     capsules at (p, R before the turn) against the objects first: a penetration ends
     the rollout as a collision, without activating or turning. ``g``, ``spaces``,
-    ``meta``: the lane's scene."""
+    ``meta``: the lane's scene; ``hulls``: the batch's mesh hulls (not gathered per lane:
+    a mesh is read only where the gripper is near it)."""
     x, dtype = lane.x, p.dtype
     n = am.rollout_numbers(x, dtype)
     tau = n["tau"]
@@ -362,7 +363,7 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
         objects = col.scene_objects(g.obj_kind, g.obj_center, g.obj_quat, g.obj_size,
                                     g.obj_mask)
         dims = x.gripper()
-        hit = x.collision & col.penetrates(objects, p, r, dims)
+        hit = x.collision & col.penetrates(objects, p, r, dims, hulls, lane.scene)
         active = active & ~hit
         # No capsule reaches beyond gripper_reach from p: objects farther than that
         # cannot be touched, a bound as 1-Lipschitz as the spaces' sdfs.
@@ -525,7 +526,9 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     task = jnp.tile(jnp.arange(T, dtype=jnp.int32), S * N)
     # Per-lane arrays keep the lane axis last ((3, B), (T, B)): the per-lane code's
     # small vectors are then rows of whole arrays, which XLA vectorises across lanes.
-    make = jax.vmap(partial(_lanes, geometry, params, spaces, populations), out_axes=-1)
+    # The hulls are read where the gripper is near a mesh, not gathered for every lane.
+    per_lane = geometry._replace(obj_hull=None, obj_hull_plane=None)  # type: ignore[arg-type]
+    make = jax.vmap(partial(_lanes, per_lane, params, spaces, populations), out_axes=-1)
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):
@@ -541,14 +544,16 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     F = max(1, B // share)
     R = max(1, B // REFILL_SHARE)
 
+    hulls = col.Hulls.of(geometry) if collision_checks else None
+
     def scene_of(scene):
         pick = (lambda a: a[scene])  # noqa: E731
-        return (jax.tree.map(pick, geometry), jax.tree.map(pick, spaces),
+        return (jax.tree.map(pick, per_lane), jax.tree.map(pick, spaces),
                 None if meta is None else jax.tree.map(pick, meta))
 
     def check(ln, p, r, step=None):
         return _check(*scene_of(ln.scene), ln, p, r, track, formula, swept_checks,
-                      collision_checks, step)
+                      collision_checks, step, hulls)
 
     def begin(ids, occupied):
         """The lanes ``ids`` and their states before the first step (checked at the

@@ -223,6 +223,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a geom or body that becomes an object without a task")
     c.set_defaults(func="import_cmd:cmd_import_mjcf")
 
+    c = command("check-collisions", "the gripper collision check of a scene against CPU "
+                "MuJoCo, with MJX's pipeline beside it (docs/reference/mujoco.md)")
+    c.add_argument("scene", type=_path, help="scene TOML file")
+    c.add_argument("--poses", type=_int_in(1, 10**6), default=2000,
+                   help="random gripper poses near the scene's objects")
+    c.add_argument("--seed", type=_int_in(0, 2**32 - 1), default=0, help="their seed")
+    c.add_argument("--json", action="store_true", help="as JSON")
+    _add_set(c)
+    c.set_defaults(func="collision_check:cmd_check_collisions")
+
     c = command("render", "3-D MuJoCo picture beside the top-down view")
     c.add_argument("scene", type=_path, help="scene TOML file")
     c.add_argument("--out", required=True, type=_path, help="PNG file")

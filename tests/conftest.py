@@ -60,6 +60,55 @@ def shipped_bake(shipped_results):
     return bake(shipped_results)
 
 
+KITCHEN_MESHES = Path(__file__).parents[1] / "sweeps" / "configs" / "kitchen_meshes"
+# Robot parts from mujoco-mjx's test data (CAD meshes no one on the team made) that fit a
+# side or top grasp: a watertight handle, and three that are not (their convex hulls).
+MJX_ASSETS = ("handle.stl", "abduction.stl", "upper_left_1.stl", "powercable.stl")
+
+
+@pytest.fixture(scope="session")
+def mesh_scenes(tmp_path_factory):
+    """``mesh_scenes(count, tasks=(3, 6), seed=0, **overrides)``: precomputed random
+    scenes of the kitchen's meshes (a bowl, a jar, a kettle: revolved profiles), robot
+    parts from mujoco-mjx's test data and primitives, each with at least one mesh, with
+    the settings' ``overrides`` (collision checks on unless they say otherwise)."""
+    import warnings
+
+    import mujoco
+
+    from geometry_precompute import precompute, random_scene
+    from geometry_precompute.errors import SceneWarning
+    from geometry_precompute.generate import check_generator
+
+    parts = tmp_path_factory.mktemp("mjx_parts")
+    assets = Path(mujoco.__file__).parent / "mjx" / "test_data" / "barkour_v0" / "assets"
+    for name in MJX_ASSETS:
+        shutil.copy(assets / name, parts / name)
+    # A compact table: cluttered scenes, short paths (the stepped tests run to the end).
+    gen = check_generator({"table": [0.7, 0.7], "sigma": 0.12, "objects": [
+        {"kind": "mesh", "folder": str(KITCHEN_MESHES), "weight": 3,
+         "templates": {"side_grasp": 2, "top_grasp": 1}},
+        {"kind": "mesh", "folder": str(parts), "weight": 2,
+         "templates": {"side_grasp": 1, "top_grasp": 1}},
+        {"kind": "mug", "radius": [0.035, 0.05]}, {"kind": "cup"},
+        {"kind": "box", "half_extents": [[0.03, 0.05], [0.06, 0.1], [0.05, 0.12]],
+         "templates": {"drawer_pull": 1, "top_grasp": 1}}]}, "<test>")
+
+    def make(count: int, tasks=(3, 6), seed: int = 0, **overrides):
+        overrides = {"collision": "on", **overrides}
+        out, k = [], seed
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SceneWarning)  # the hulls of open meshes
+            while len(out) < count:
+                scene = random_scene(k, ("uniform", "gaussian")[k % 2], *tasks, generator=gen)
+                k += 1
+                if any(o.kind == "mesh" for o in scene.objects):
+                    out.append(precompute(scene, scene.settings().with_overrides(overrides)))
+        return out
+
+    return make
+
+
 def write_scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
     path = tmp_path / name
     path.write_text(text)

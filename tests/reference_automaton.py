@@ -8,6 +8,7 @@ recomputed every step.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from geometry_precompute.frames import frame_from_approach
-from geometry_precompute.schema import KINDS, POINT_TO_AXIS
+from geometry_precompute.schema import KINDS, MESH, POINT_TO_AXIS
 
 OUTCOME_NAMES = ("success", "wrong", "ambiguous", "timeout", "collision")
 PENETRATION = 1e-4  # m: deeper than this counts as a collision (as in shacc_jax.collision)
@@ -132,8 +133,10 @@ def angle_between(r1: Rotation, r2: Rotation) -> float:
 class Collider:
     """CPU MuJoCo (``mj_geomDistance``) on a model of one scene's real objects and the
     three gripper capsules, posed directly (no kinematics). The objects come from the
-    baked arrays, or with ``mjcf`` from the scene's exported MJCF (its geoms named
-    ``object:*``); the capsules are added to either model with MjSpec."""
+    baked arrays (a mesh object as a MuJoCo mesh of its baked hull's corners, which
+    MuJoCo hulls again), or with ``mjcf`` from the scene's exported MJCF (its geoms
+    named ``object:*``, meshes as the scene's own); the capsules are added to either
+    model with MjSpec. MuJoCo collides with a mesh's convex hull."""
 
     def __init__(self, baked, scene: int, mjcf: str | None = None):
         import mujoco
@@ -143,29 +146,38 @@ class Collider:
         self.opening = float(baked.gripper_opening[s])
         r_f, r_p = float(baked.gripper_finger_radius[s]), float(baked.gripper_palm_radius[s])
         if mjcf is None:
-            geoms = []
+            geoms, assets = [], []
+            fmt = lambda v: " ".join(repr(float(x)) for x in np.ravel(v))  # noqa: E731
             for o in np.flatnonzero(baked.obj_mask[s]):
+                pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'
+                if baked.obj_kind[s, o] == MESH:
+                    corners = np.unique(baked.obj_hull[s, o].reshape(-1, 3), axis=0)
+                    assets.append(f'<mesh name="hull:{o}" vertex="{fmt(corners)}"/>')
+                    geoms.append(f'<geom name="object:{o}" type="mesh" mesh="hull:{o}" {pose}/>')
+                    continue
                 kind = KINDS[baked.obj_kind[s, o]]
                 size = baked.obj_size[s, o] if kind == "box" else baked.obj_size[s, o][:2]
-                fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
-                pose = f'pos="{fmt(baked.obj_center[s, o])}" quat="{fmt(baked.obj_quat[s, o])}"'
                 geoms.append(f'<geom name="object:{o}" type="{kind}" size="{fmt(size)}" {pose}/>')
-            mjcf = f'<mujoco><worldbody>{"".join(geoms)}</worldbody></mujoco>'
-        spec = mujoco.MjSpec.from_string(mjcf)
-        hand = spec.worldbody.add_body(name="gripper")
-        hand.add_freejoint()
-        for radius, half in ((r_f, self.length / 2), (r_f, self.length / 2),
-                             (r_p, self.opening / 2)):
-            hand.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, half, 0])
+            mjcf = (f'<mujoco><asset>{"".join(assets)}</asset>'
+                    f'<worldbody>{"".join(geoms)}</worldbody></mujoco>')
         self.mujoco = mujoco
-        self.model = spec.compile()
+        self.model = _model(mjcf, r_f, r_p, self.length, self.opening)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_kinematics(self.model, self.data)  # places the object geoms
         self.objects = np.array([g for g in range(self.model.ngeom)
                                  if self.model.geom(g).name.startswith("object:")])
         self.capsules = np.arange(self.model.ngeom - 3, self.model.ngeom)
 
-    def deepest(self, p, r: Rotation) -> float:
+    def nearest_kind(self, p, r: Rotation) -> str:
+        """The kind of the object geom nearest the gripper at (p, r) ("mesh", "box", ...),
+        by MuJoCo's distances (the one that decides a collision there)."""
+        self._pose(p, r)
+        dist = [min(self.mujoco.mj_geomDistance(self.model, self.data, g, c, 1.0, None)
+                    for c in self.capsules) for g in self.objects]
+        kind = self.model.geom_type[self.objects[int(np.argmin(dist))]]
+        return self.mujoco.mjtGeom(kind).name.removeprefix("mjGEOM_").lower()
+
+    def _pose(self, p, r: Rotation) -> None:
         R = r.as_matrix()
         x, y, z = R[:, 0], R[:, 1], R[:, 2]
         half = self.opening / 2
@@ -176,6 +188,9 @@ class Collider:
         for g, c, m in zip(self.capsules, centres, [R, R, palm], strict=True):
             self.data.geom_xpos[g] = c
             self.data.geom_xmat[g] = m.ravel()
+
+    def deepest(self, p, r: Rotation) -> float:
+        self._pose(p, r)
         # mj_geomDistance answers exactly up to distmax (1 m) and distmax beyond it; pairs
         # whose bounding spheres are apart by more than 1 cm cannot decide a penetration.
         xpos, rbound = self.data.geom_xpos, self.model.geom_rbound
@@ -187,6 +202,20 @@ class Collider:
 
     def penetrates(self, p, r: Rotation) -> bool:
         return self.deepest(p, r) < -PENETRATION
+
+
+@functools.lru_cache(maxsize=64)
+def _model(mjcf: str, r_f: float, r_p: float, length: float, opening: float):
+    """The objects of ``mjcf`` and the gripper's capsules as one MuJoCo model, compiled
+    once per scene and gripper (a mesh's hull is computed in the compile)."""
+    import mujoco
+
+    spec = mujoco.MjSpec.from_string(mjcf)
+    hand = spec.worldbody.add_body(name="gripper")
+    hand.add_freejoint()
+    for radius, half in ((r_f, length / 2), (r_f, length / 2), (r_p, opening / 2)):
+        hand.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, half, 0])
+    return spec.compile()
 
 
 # --- the rollout -----------------------------------------------------------------------
@@ -268,12 +297,13 @@ class User:
 
 
 def rollout(baked, scene: int, mode: str, start: int, target: int,
-            user: User | None = None, swept: bool = False) -> Result:
+            user: User | None = None, swept: bool = False, mjcf: str | None = None) -> Result:
     """One rollout from baked arrays (float64), SPEC section 9 step by step; with
     ``user``, the imperfect user of the model page's "Simulated users" (direction
     noise, lag, tremor, aiming at the object) instead of the perfect one; with
     ``swept``, activation where the gripper's segment of a step first enters a space
-    (the path length up to there, in proportion)."""
+    (the path length up to there, in proportion); with ``mjcf``, collisions against
+    that MJCF's objects (the scene's export) instead of the baked ones."""
     T = int(baked.task_mask[scene].sum())
     which = "init" if mode == "baseline" else "opt"
 
@@ -295,7 +325,7 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
     p = start_pose[:3].astype(float).copy()
     r = _rot(start_pose[3:])
     travelled, meta_steps = 0.0, 0
-    collider = Collider(baked, scene) if bool(baked.collision[scene]) else None
+    collider = Collider(baked, scene, mjcf) if bool(baked.collision[scene]) else None
 
     def check(p):
         sd = np.array([s.sdf(p) for s in active])

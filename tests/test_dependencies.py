@@ -52,9 +52,6 @@ def test_each_runtime_dependency_is_used(dist):
         assert subprocess.run([sys.executable, "-c", code]).returncode == 0, \
             f"{feature} no longer imports {module}: is {dist} still needed?"
         return
-    if dist == "mujoco-mjx" and MODULE[dist] not in _imported():
-        pytest.xfail("mujoco-mjx is declared for the gripper's collisions with mesh objects "
-                     "(the user's-own-objects work), which do not exist yet")
     module = MODULE.get(dist, dist.replace("-", "_"))
     assert module in _imported(), f"{dist} is declared but no module of {PACKAGES} imports " \
                                   f"{module}"

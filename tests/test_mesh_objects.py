@@ -206,11 +206,6 @@ def test_bad_mesh_objects_get_one_line_errors(tmp_path):
                   "handle_grasp")
     with pytest.raises(InputError, match=r"tasks\[t\].template: handle_grasp does not fit a mesh"):
         load_scene(path)
-    path = _write(tmp_path, {"kind": "mesh", "mesh": "c.stl", "position": [0, 0, 0]})
-    s = load_scene(path)
-    r = precompute(s, s.settings(DEFAULTS, {**GRID, "collision": "on"}))
-    with pytest.raises(InputError, match="collision checks against mesh objects"):
-        bake([r])
 
 
 def test_a_mesh_in_millimetres_is_warned_about(tmp_path):
