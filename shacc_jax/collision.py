@@ -167,38 +167,56 @@ def deepest(objects, p: Float[Array, "3"], q: Float[Array, "4"], dims: Float[Arr
     a convex body by more than eps iff its axis comes within radius - eps of it).
 
     A mesh object (``hulls``, the batch's, and ``scene``, this scene's index in it) is
-    its convex hull (:func:`hull_distance`). Its bounding cylinder's distance bounds the
-    hull's from below, and only pairs whose bound lies below ``cutoff`` (default:
-    -eps, where a pair can decide a penetration) are measured exactly, one pair per
-    round of a loop that ends when no pair is left; the others count with their
-    bound."""
+    its convex hull. Its bounding cylinder's distance bounds the hull's from below, and
+    only pairs whose bound lies below ``cutoff`` can count: with a ``cutoff`` given,
+    each is measured exactly (:func:`hull_distance`), one pair per round of a loop that
+    ends when no pair is left. Without one (the penetration decision, -eps), a first
+    loop clips each such pair by the hull's planes (:func:`hull_clips`): a pair that
+    meets the hull counts with -radius, one that misses the planes moved out by
+    radius - eps with -eps (it cannot penetrate), and only the pairs left open are
+    measured, in a second loop."""
     kind, _, _, size, mask = objects
     a_loc, d_loc, radius = pair_axes(objects, p, q, dims)
     dist = segment_distance(a_loc, d_loc, kind[None, :], size[None, :, :])
     gap = dist - radius[:, None]
     if hulls is not None:
-        gap = _hull_gaps(hulls, scene, kind, mask, a_loc, d_loc, radius, gap,
-                         -PENETRATION_EPS if cutoff is None else cutoff)
+        todo = ((kind == MESH) & mask)[None, :] & (
+            gap < (-PENETRATION_EPS if cutoff is None else cutoff))
+        if cutoff is None:
+            gap, todo = _pair_loop(todo, gap, lambda c, o, g: _clipped(
+                hulls.plane[scene, o], a_loc[c, o], d_loc[c, o], radius[c], g))
+        gap = _pair_loop(todo, gap, lambda c, o, g: (hull_distance(
+            hulls.tri[scene, o], hulls.plane[scene, o], a_loc[c, o], d_loc[c, o])
+            - radius[c], False))[0]
     return jnp.min(jnp.where(mask[None, :], gap, jnp.inf))
 
 
-def _hull_gaps(hulls: Hulls, scene, kind, mask, a_loc, d_loc, radius, gap, cutoff):
-    """``gap`` (capsules, objects) with the mesh pairs below ``cutoff`` measured exactly
+def _clipped(plane, a, d, radius, gap):
+    """A mesh pair's gap as the hull's planes settle it, and whether they leave it open
     (:func:`deepest`)."""
+    meets, near = hull_clips(plane, a, d, radius - PENETRATION_EPS)
+    return (jnp.where(meets, -radius, jnp.where(near, gap, -PENETRATION_EPS)),
+            near & ~meets)
+
+
+def _pair_loop(todo: Bool[Array, "C O"], gap: Float[Array, "C O"], measure):
+    """``measure(c, o, gap) -> (gap, open)`` of each pair ``todo`` marks, one pair per
+    round of a while loop (vmapped, it runs as many rounds as the lane with most pairs
+    needs); the gaps, and the pairs left open."""
     O = gap.shape[1]
-    todo = ((kind == MESH) & mask)[None, :] & (gap < cutoff)
     order = jnp.argsort(~todo.reshape(-1), stable=True)
     count = jnp.sum(todo)
 
     def body(state):
-        i, out = state
+        i, out, still = state
         c, o = order[i] // O, order[i] % O
-        exact = hull_distance(hulls.tri[scene, o], hulls.plane[scene, o], a_loc[c, o],
-                              d_loc[c, o]) - radius[c]
-        return i + 1, out.at[c, o].set(exact)
+        value, left = measure(c, o, out[c, o])
+        return i + 1, out.at[c, o].set(value), still.at[c, o].set(left)
 
-    return jax.lax.while_loop(lambda state: state[0] < count, body,
-                              (jnp.zeros((), count.dtype), gap))[1]
+    _, gap, still = jax.lax.while_loop(lambda state: state[0] < count, body,
+                                       (jnp.zeros((), count.dtype), gap,
+                                        jnp.zeros_like(todo)))
+    return gap, still
 
 
 def _clip_meets(alpha, beta, axis: int = -1):
@@ -287,6 +305,28 @@ def hull_distance(tri: Float[Array, "F 3 3"], plane: Float[Array, "F 4"], a: Flo
         h = n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - b
         best = jnp.minimum(best, jnp.min(jnp.where(inside[j] & (h >= 0), h * h, inf)))
     return jnp.where(meets, 0.0, jnp.sqrt(best))
+
+
+def hull_clips(plane: Float[Array, "F 4"], a: Float[Array, "3"], d: Float[Array, "3"],
+               margin) -> tuple[Array, Array]:
+    """Whether the segment a + t d, t in [0, 1], meets the convex hull of planes
+    ``plane`` (then its distance is 0), and whether it meets the hull's planes moved out
+    by ``margin`` (a polytope that holds every point within ``margin`` of the hull: a
+    segment that misses it is farther than ``margin``). Two clips (Cyrus and Beck), a
+    few operations a plane: where neither decides, :func:`hull_distance` does.
+
+    >>> import jax.numpy as jnp
+    >>> cube = jnp.array([[1., 0, 0, .1], [-1, 0, 0, .1], [0, 1, 0, .1], [0, -1, 0, .1],
+    ...                   [0, 0, 1, .1], [0, 0, -1, .1]])
+    >>> [bool(v) for v in hull_clips(cube, jnp.array([.15, 0, 0]), jnp.array([0, 0, .1]), .01)]
+    [False, False]
+    >>> [bool(v) for v in hull_clips(cube, jnp.array([.105, 0, 0]), jnp.array([0, 0, .1]), .01)]
+    [False, True]
+    """
+    n = tuple(plane[:, i] for i in range(3))
+    sa = n[0] * a[0] + n[1] * a[1] + n[2] * a[2] - plane[:, 3]
+    sd = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+    return _clip_meets(sa, sd, axis=0), _clip_meets(sa - margin, sd, axis=0)
 
 
 def lower_bound(a, d, kind, size):
@@ -403,9 +443,10 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
     poses before the lane's first sure penetration, are searched exactly: numbered (a
     running count over the poses, then over each pose's pairs), gathered into rounds of
     1/ROUND_SHARE of all pairs, as many rounds as they need; a mesh's pairs get rounds
-    of their own (:func:`hull_distance`). (Looking each round's pairs up by a binary
-    search of the running count instead of scattering them was slower on an H100:
-    benchmarks/RESULTS.md.)"""
+    of their own: first a clip by the hull's planes (:func:`hull_clips`), then
+    :func:`hull_distance` for the pairs the planes leave open. (Looking each round's
+    pairs up by a binary search of the running count instead of scattering them was
+    slower on an H100: benchmarks/RESULTS.md.)"""
     kind, centre, mat, size, mask = objects
     B, W = live.shape
     O = kind.shape[1]
@@ -449,9 +490,21 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
         dist = segment_distance(a_loc, d_loc, kind[lane, o], size[lane, o])
         return pose, dist < radius - PENETRATION_EPS
 
-    hit = _searched(flags if hulls is None else [f & solid for f in flags], solid_pair, B * W)
+    def pairs(fs):  # (B W, 3 O): per pose, the pairs capsule by capsule
+        return jnp.concatenate([f.reshape(B * W, O) for f in fs], axis=1)
+
+    hit = _searched(pairs(flags if hulls is None else [f & solid for f in flags]),
+                    solid_pair, B * W)[0]
     if hulls is not None:
         scene, obj = ids
+
+        def mesh_clip(i):
+            """The hull's planes settle most pairs: met (a penetration) or missed with
+            the margin (none); the rest are left open."""
+            pose, lane, o, a_loc, d_loc, radius = pair_axis(i)
+            meets, near = hull_clips(hulls.plane[scene[lane], obj[lane, o]], a_loc, d_loc,
+                                     radius - PENETRATION_EPS)
+            return pose, meets, near & ~meets
 
         def mesh_pair(i):
             pose, lane, o, a_loc, d_loc, radius = pair_axis(i)
@@ -459,41 +512,50 @@ def first_penetration(objects, p: Float[Array, "B W 3"], q: Float[Array, "B W 4"
             dist = hull_distance(hulls.tri[s, k], hulls.plane[s, k], a_loc, d_loc)
             return pose, dist < radius - PENETRATION_EPS
 
-        hit = hit | _searched([f & ~solid for f in flags], mesh_pair, B * W)
+        met, open_pairs = _searched(pairs([f & ~solid for f in flags]), mesh_clip, B * W,
+                                    leave_open=True)
+        assert open_pairs is not None
+        hit = hit | met | _searched(open_pairs, mesh_pair, B * W)[0]
     hit = hit.reshape(B, W) & before_sure
     return jnp.where(jnp.any(hit, axis=1), jnp.argmax(hit, axis=1), first_sure)
 
 
-def _searched(flags, one_pair, n_poses: int) -> Array:
+def _searched(candidate: Bool[Array, "n P"], one_pair, n_poses: int,
+              leave_open: bool = False) -> tuple[Array, Array | None]:
     """Which of n_poses poses have a pair that ``one_pair`` finds penetrating, among the
-    pairs ``flags`` (per capsule, (B, W, O)) marks: numbered by a running count over the
-    poses and each pose's pairs, and gathered into rounds of K pairs."""
-    O = flags[0].shape[-1]
-    flags = [f.reshape(n_poses, O) for f in flags]
-    # The running count within each pose, written out over its C x O pairs (no scan).
+    pairs ``candidate`` marks (per pose, its P pairs): numbered by a running count over
+    the poses and each pose's pairs, and gathered into rounds of K pairs. With
+    ``leave_open``, ``one_pair`` also says which pairs it left undecided, and they come
+    back marked the same way (for a round of another ``one_pair``)."""
+    P = candidate.shape[1]
+    # The running count within each pose, written out over its pairs (no scan).
     within, total = [], jnp.zeros(n_poses, jnp.int32)
-    for f in flags:
-        for o in range(O):
-            total = total + f[:, o].astype(jnp.int32)
-            within.append(total)
-    candidate = jnp.concatenate(flags, axis=1)
+    for k in range(P):
+        total = total + candidate[:, k].astype(jnp.int32)
+        within.append(total)
     count = total
     before = jnp.cumsum(count) - count
     rank = (before[:, None] + jnp.stack(within, axis=1) - 1).reshape(-1)
-    candidate = candidate.reshape(-1)
-    n = candidate.shape[0]
+    flat = candidate.reshape(-1)
+    n = flat.shape[0]
     K = max(1, -(-n // ROUND_SHARE))
     rounds = (before[-1] + count[-1] + K - 1) // K
 
-    def one_round(j, hit):
+    def one_round(j, state):
+        hit, still = state
         slot = rank - j * K
-        take = candidate & (slot >= 0) & (slot < K)
+        take = flat & (slot >= 0) & (slot < K)
         idx = jnp.full(K, n, jnp.int32).at[jnp.where(take, slot, K)].set(
             jnp.arange(n, dtype=jnp.int32), mode="drop")
-        pose, pen = jax.vmap(one_pair)(jnp.minimum(idx, n - 1))
-        return hit.at[jnp.where(idx < n, pose, n_poses)].max(pen, mode="drop")
+        out = jax.vmap(one_pair)(jnp.minimum(idx, n - 1))
+        hit = hit.at[jnp.where(idx < n, out[0], n_poses)].max(out[1], mode="drop")
+        if leave_open:
+            still = still.at[idx].set(out[2], mode="drop")
+        return hit, still
 
-    return jax.lax.fori_loop(0, rounds, one_round, jnp.zeros(n_poses, bool))
+    still = jnp.zeros(n if leave_open else 0, bool)
+    hit, still = jax.lax.fori_loop(0, rounds, one_round, (jnp.zeros(n_poses, bool), still))
+    return hit, still.reshape(n_poses, P) if leave_open else None
 
 
 class LaneObjects(NamedTuple):
