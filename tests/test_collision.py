@@ -462,7 +462,7 @@ def test_objects_are_the_exported_mjcf_geoms(shipped_results):
 
 
 def test_collision_rollouts_agree_on_extra_and_random_scenes(mesh_scenes):
-    """The extra scenes (a tray, a box, among mugs: every rollout) and 100 random scenes
+    """The extra scenes (a tray, a box, among mugs: every third start) and 100 random scenes
     with mesh objects (3 to 6 tasks, half uniform, half gaussian: every task in every
     mode from one start per scene) against the NumPy Automaton with CPU MuJoCo
     collisions on each scene's exported MJCF (a mesh as MuJoCo takes it: its convex
@@ -484,7 +484,7 @@ def test_collision_rollouts_agree_on_extra_and_random_scenes(mesh_scenes):
     ro = run(b).rollouts
     N = b.n_starts
     keys = [(s, m, n, t) for s, r in enumerate(extra) for m in range(len(shacc_jax.MODES))
-            for n in range(N) for t in range(len(r.spaces))]
+            for n in range(0, N, 3) for t in range(len(r.spaces))]
     keys += [(s, m, (7 * s) % N, t) for s, r in enumerate(rand, start=len(extra))
              for m in range(len(shacc_jax.MODES)) for t in range(len(r.spaces))]
     differ, with_mesh = [], 0
