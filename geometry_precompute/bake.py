@@ -32,6 +32,7 @@ import numpy as np
 from . import population, schema
 from .bodies import object_body
 from .errors import InputError
+from .frames import yaw_matrix
 from .population import POPULATED, Population
 from .precompute import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS, batch_layout
@@ -277,8 +278,7 @@ def _placed_hull(obj, center) -> tuple[np.ndarray, np.ndarray]:
     from .mesh_objects import hull
 
     tri, normals = hull(obj.mesh)
-    c, s = np.cos(obj.yaw), np.sin(obj.yaw)
-    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    turn = yaw_matrix(obj.yaw)
     offset = np.asarray(obj.position, float) - np.asarray(center, float)
     tri = tri @ turn.T + offset
     normals = normals @ turn.T

@@ -263,15 +263,6 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 _default_showwarning = warnings.showwarning
 
 
-def entry() -> None:
-    """The ``shacc`` console script: Ctrl-C handled from the first moment
-    (``interrupt``), then :func:`main`."""
-    from . import interrupt
-
-    interrupt.install()
-    sys.exit(main())
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status. Every fault ends in one line on
     stderr (``faults.report``): bad input 2, a fault of the machine 1, Ctrl-C 130, a
@@ -320,4 +311,6 @@ def _run(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
+    from .launch import entry
+
     entry()

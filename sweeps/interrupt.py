@@ -31,8 +31,6 @@ import signal
 import sys
 import threading
 
-from geometry_precompute.fileio import COMMIT, abandon_pending
-
 _INSTALLED = False
 
 
@@ -89,8 +87,13 @@ def _wait() -> None:
 def end(status: int, line: str) -> None:
     """End this process now with ``line`` on stderr and exit ``status``, as Ctrl-C
     does (module docstring)."""
-    COMMIT.acquire()  # held until the process ends: no rename, no stdout write after
-    abandon_pending()
+    # Only a process that imported `fileio` can be writing (importing it here could
+    # wait on the main thread's import lock): the interrupt lands within milliseconds
+    # of start-up, before the command line is imported.
+    fileio = sys.modules.get("geometry_precompute.fileio")
+    if fileio is not None:
+        fileio.COMMIT.acquire()  # held until the process ends: no rename, no write after
+        fileio.abandon_pending()
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

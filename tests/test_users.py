@@ -6,8 +6,10 @@ batch, the mode and the device split."""
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from reference_automaton import OUTCOME_NAMES, User, rollout, turn_across
@@ -92,13 +94,18 @@ def test_the_perfect_user_stepped_is_the_closed_form(scenes):
         np.testing.assert_allclose(a[real], b[real], atol=1e-6, rtol=0)
 
 
+@partial(jax.jit, static_argnums=(2, 3, 4))
+def _draw_all(seed, scene_key, N: int, T: int, n_steps: int):
+    # One program for every scene and case (seed and scene key are arguments).
+    return jax.vmap(jax.vmap(lambda n, t: users.user_draws(seed, scene_key, t, n, n_steps,
+                                                           np.float64), (None, 0)), (0, None))(
+        jnp.arange(N, dtype=jnp.int32), jnp.arange(T, dtype=jnp.int32))
+
+
 def _draws(baked, scene: int, n_steps: int):
     """Every rollout's random numbers of one scene, (N, T), from the kernel's stream."""
-    N, T = baked.n_starts, baked.n_tasks
-    draw = jax.jit(jax.vmap(jax.vmap(
-        lambda n, t: users.user_draws(baked.user_seed[scene], baked.scene_key[scene], t, n,
-                                      n_steps, np.float64), (None, 0)), (0, None)))
-    steps, once = draw(np.arange(N, dtype=np.int32), np.arange(T, dtype=np.int32))
+    steps, once = _draw_all(baked.user_seed[scene], baked.scene_key[scene], baked.n_starts,
+                            baked.n_tasks, n_steps)
     return jax.tree.map(np.asarray, steps), jax.tree.map(np.asarray, once)
 
 

@@ -1,0 +1,22 @@
+"""The ``shacc`` console script.
+
+Its only job is to handle Ctrl-C before anything else happens: the wrapper that pip
+writes imports this small module, which installs :mod:`sweeps.interrupt` and only then
+imports the command line (on a fresh install Python compiles every module it imports
+the first time, which took long enough for a Ctrl-C to land in the middle of it and
+print a traceback).
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def entry() -> None:
+    """Install the Ctrl-C handling (``interrupt``), then run :func:`sweeps.cli.main`."""
+    from . import interrupt
+
+    interrupt.install()
+    from .cli import main
+
+    sys.exit(main())
