@@ -132,6 +132,28 @@ CTRL_C = {
 }
 
 
+def test_ctrl_c_while_the_command_line_is_imported():
+    """The console script handles Ctrl-C before it imports the command line: a fresh
+    install compiles every module on its first import, long enough for a Ctrl-C to land
+    there (it did, in CI: a KeyboardInterrupt traceback). Here the import itself sends
+    the signal, so the moment is certain."""
+    program = (
+        "import os, signal, sys, time, types\n"
+        "class Finder:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'sweeps.cli':\n"
+        "            os.kill(os.getpid(), signal.SIGINT)\n"
+        "            time.sleep(5)\n"
+        "        return None\n"
+        "sys.meta_path.insert(0, Finder())\n"
+        "from sweeps.launch import entry\n"
+        "entry()\n")
+    res = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 130, res.stderr
+    assert res.stderr.splitlines() == ["interrupted"], res.stderr
+
+
 @pytest.mark.parametrize("name,moment", [(n, t) for n, (_, ts) in CTRL_C.items() for t in ts])
 def test_ctrl_c_at_any_moment(tmp_path, name, moment):
     """Exactly `interrupted`, status 130, no crash, no output, no process left."""
