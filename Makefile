@@ -18,7 +18,7 @@ demo: $(BIN)/shacc
 test: $(BIN)/shacc
 	$(BIN)/ruff check .
 	$(BIN)/mypy  # the three packages, as pyproject's [tool.mypy] says
-	$(BIN)/python -m pytest -q -n 2  # two processes: CI has two cores (11.7 against 14-17 min)
+	$(BIN)/python -m pytest -q -n 2  # two processes: CI has two cores
 
 bench: $(BIN)/shacc
 	$(BIN)/python benchmarks/bench_precompute.py
