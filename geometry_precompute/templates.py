@@ -85,9 +85,6 @@ class TaskSpace:
         state.pop("_local", None)
         return state
 
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-
     @cached_property
     def _local(self) -> Any:
         """The template's function of the parameters: centre (object frame), dims."""

@@ -29,7 +29,6 @@ import numpy as np
 
 from geometry_precompute.errors import InputError
 
-PENETRATION = 1e-4  # m: as shacc_jax.collision.PENETRATION_EPS
 DEEP = 1e-3  # m: a missed penetration deeper than this is reported apart
 
 
@@ -139,11 +138,11 @@ def check(result, poses: int = 2000, seed: int = 0, spread: float = 0.06) -> dic
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         theirs = np.asarray(jax.jit(jax.vmap(mjx_deepest))(
             jnp.asarray(centres, jnp.float32), jnp.asarray(mats, jnp.float32)))
-    pen = want < -PENETRATION
+    pen = want < -col.PENETRATION_EPS
     close = (want > 0) & (want < 0.01)
 
     def versus(got) -> dict[str, Any]:
-        mine = got < -PENETRATION
+        mine = got < -col.PENETRATION_EPS
         return {"agreement": float((mine == pen).mean()),
                 "missed": int((pen & ~mine).sum()),
                 "missed_deeper_than_1mm": int((pen & ~mine & (want < -DEEP)).sum()),
