@@ -233,13 +233,17 @@ def cmd_kernels(args) -> None:
     kernels = [e for e in spans if not str(e.get("name", "")).lower().startswith("mem")]
     busy = sum(float(e.get("dur", 0)) for e in kernels) * 1e-6
     names: dict[str, int] = {}
+    spent: dict[str, float] = {}
     for e in kernels:
         names[e["name"]] = names.get(e["name"], 0) + 1
+        spent[e["name"]] = spent.get(e["name"], 0.0) + float(e.get("dur", 0)) * 1e-3
     row = {"device": str(jax.devices()[0]), "scenes": args.scenes, "user": args.user,
            "stepped": layout.stepped_users, "block": args.block, "wall_s": wall,
            "kernels": len(kernels), "copies_and_sets": len(spans) - len(kernels),
            "kernel_busy_s": busy, "mean_kernel_us": 1e6 * busy / max(len(kernels), 1),
-           "top": sorted(names.items(), key=lambda kv: -kv[1])[:8]}
+           "top": sorted(names.items(), key=lambda kv: -kv[1])[:8],
+           "top_ms": [(k, names[k], round(v, 2)) for k, v in
+                      sorted(spent.items(), key=lambda kv: -kv[1])[:25]]}
     print(json.dumps(row), flush=True)
 
 

@@ -16,7 +16,7 @@ on the axis, so the azimuth never matters.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -171,8 +171,55 @@ def prepared_contains(s: Prepared, p: Float[Array, "3"]) -> Bool[Array, ""]:
 
 
 def prepared_project(s: Prepared, p: Float[Array, "3"]) -> Float[Array, "3"]:
-    local = sdf_and_project_local(s.kind, s.dims, s.trig, quat.matvec(s.rot.T, p - s.center))[1]
-    return s.center + quat.matvec(s.rot, local)
+    """The closest point of the shape to ``p`` (``p`` itself inside)."""
+    return jnp.stack(project_components(s.kind, s.center, s.rot, s.dims, s.trig,
+                                        (p[0], p[1], p[2])))
+
+
+def project_components(kind: Array, c: Array, rot: Any, dims: Array, trig: Array,
+                       p: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
+    """:func:`prepared_project` on scalar components, like :func:`prepared_sdf`, of the
+    fields of a ``Prepared``: the point and the closest point as three arrays each;
+    ``rot`` may be rows of separate entries (``rot[i][j]``). Vmapped over lanes every
+    intermediate is a plain row of the batch; the stacked form
+    (:func:`sdf_and_project_local`) became 3-vector products and reductions over a
+    minor axis of three, and a stacked result makes XLA's CPU backend compute the
+    whole projection once per component. tests/test_shapes_jax.py checks both
+    agree."""
+    dx, dy, dz = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+    lx = rot[0][0] * dx + rot[1][0] * dy + rot[2][0] * dz
+    ly = rot[0][1] * dx + rot[1][1] * dy + rot[2][1] * dz
+    lz = rot[0][2] * dx + rot[1][2] * dy + rot[2][2] * dz
+    rho = _sqrt0(lx * lx + ly * ly)
+    on_axis = rho > 0
+    safe_rho = jnp.where(on_axis, rho, 1.0)
+    # Cylinder and disk: onto the rectangle [0, r] x [-h/2, h/2] of the meridian plane.
+    r, half = dims[0], dims[1] / 2
+    scale = jnp.where(rho > r, r / safe_rho, 1.0)
+    cyl = (lx * scale, ly * scale, jnp.clip(lz, -half, half))
+    # Cone: the nearer of the lateral segment from the apex and the base segment.
+    length, tan_a, cos_a, sin_a = dims[0], trig[0], trig[1], trig[2]
+    radius = length * tan_a
+    t = jnp.clip((rho * radius + lz * length) / (radius * radius + length * length), 0.0, 1.0)
+    lat_r, lat_z = t * radius, t * length
+    base_r = jnp.clip(rho, 0.0, radius)
+    d_lat = _sqrt0((rho - lat_r) * (rho - lat_r) + (lz - lat_z) * (lz - lat_z))
+    d_base = _sqrt0((rho - base_r) * (rho - base_r) + (lz - length) * (lz - length))
+    lateral = d_lat <= d_base
+    near_r = jnp.where(lateral, lat_r, base_r)
+    near_z = jnp.where(lateral, lat_z, length)
+    inside = (lz <= length) & (rho * cos_a <= lz * sin_a)
+    ux, uy = jnp.where(on_axis, lx / safe_rho, 0.0), jnp.where(on_axis, ly / safe_rho, 0.0)
+    cone = (jnp.where(inside, lx, ux * near_r), jnp.where(inside, ly, uy * near_r),
+            jnp.where(inside, lz, near_z))
+    box = (jnp.clip(lx, -dims[0], dims[0]), jnp.clip(ly, -dims[1], dims[1]),
+           jnp.clip(lz, -dims[2], dims[2]))
+    is_box, is_cone = kind == BOX, kind == CONE
+    x, y, z = (jnp.where(is_box, b, jnp.where(is_cone, k, a))
+               for a, k, b in zip(cyl, cone, box, strict=True))
+    return (c[0] + rot[0][0] * x + rot[0][1] * y + rot[0][2] * z,
+            c[1] + rot[1][0] * x + rot[1][1] * y + rot[1][2] * z,
+            c[2] + rot[2][0] * x + rot[2][1] * y + rot[2][2] * z)
 
 
 def sdf(kind, center, q, dims, p: Float[Array, "3"]) -> Float[Array, ""]:

@@ -199,14 +199,47 @@ def turn_across(u: Float[Array, "3"], angle: Array, axis_angle: Array) -> Float[
     >>> [round(float(x), 6) + 0.0 for x in v]
     [0.0, -1.0, 0.0]
     """
-    h = jnp.where(jnp.abs(u[0]) > 0.9, jnp.array([0.0, 1.0, 0.0], u.dtype),
-                  jnp.array([1.0, 0.0, 0.0], u.dtype))
-    e1 = h - jnp.dot(h, u) * u
-    e1 = e1 / jnp.sqrt(jnp.dot(e1, e1))
-    e2 = jnp.cross(u, e1)
+    return jnp.stack(_turn_across(u[0], u[1], u[2], angle, axis_angle))
+
+
+def _turn_across(ux, uy, uz, angle, axis_angle) -> tuple[Array, Array, Array]:
+    """:func:`turn_across` on scalar components (vmapped over lanes, every intermediate
+    a plain row of the batch, no 3-vector products)."""
+    big = jnp.abs(ux) > 0.9
+    hu = jnp.where(big, uy, ux)  # <h, u>
+    e1x = jnp.where(big, 0.0, 1.0) - hu * ux
+    e1y = jnp.where(big, 1.0, 0.0) - hu * uy
+    e1z = -hu * uz
+    n = jnp.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    e1x, e1y, e1z = e1x / n, e1y / n, e1z / n
+    e2x, e2y, e2z = uy * e1z - uz * e1y, uz * e1x - ux * e1z, ux * e1y - uy * e1x
     # a x u = cos(psi) (e1 x u) + sin(psi) (e2 x u) = -cos(psi) e2 + sin(psi) e1
-    across = jnp.sin(axis_angle) * e1 - jnp.cos(axis_angle) * e2
-    return jnp.cos(angle) * u + jnp.sin(angle) * across
+    sp, cp = jnp.sin(axis_angle), jnp.cos(axis_angle)
+    ca, sa = jnp.cos(angle), jnp.sin(angle)
+    return (ca * ux + sa * (sp * e1x - cp * e2x), ca * uy + sa * (sp * e1y - cp * e2y),
+            ca * uz + sa * (sp * e1z - cp * e2z))
+
+
+# A lane's 3-vector in the loop's state: three arrays, not one stacked (3,) array.
+# XLA's CPU backend computes a stacked result's whole expression once per component,
+# and batched 3-vector products become library calls: the baseline mode's stepped pass
+# (50 scenes, 2-core CPU) took 0.30 s with the vectors stacked and 0.26 s on components.
+V3 = tuple[Array, Array, Array]
+
+
+def _length(v) -> Array:
+    """|v| of one lane's 3-vector (a (3,) array or :data:`V3`) as explicit sums (the
+    same in any batch, ``determinism``)."""
+    return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+def _v3(v: Array) -> V3:
+    return (v[0], v[1], v[2])
+
+
+def _xyz(component) -> V3:
+    """The :data:`V3` of ``component(i)``, i = 0, 1, 2."""
+    return (component(0), component(1), component(2))
 
 
 def _components_first(sp: shapes.Prepared) -> shapes.Prepared:
@@ -231,14 +264,21 @@ REFILL_SHARE = 16
 # Per backend: the share of lanes checked in full per step (1: all, without gathering
 # the others out), and the steps per loop iteration (each iteration costs a
 # device-to-host round trip for its condition on an accelerator). Measured on an H100,
-# 10.8 M rollouts, 2^19 slots, 4 steps an iteration: shares 1, 4 and 8 took 2.30, 1.62
-# and 1.95 s; 8 steps an iteration 1.54 s, but 45 s to compile against 33 s.
-STEPPING = {"cpu": (FULL_CHECK_SHARE, 1), "accelerator": (FULL_CHECK_SHARE, 4)}
+# 10.8 M rollouts, 2^19 slots (benchmarks/RESULTS.md): with 4 steps an iteration,
+# shares 1, 4 and 8 took 2.30, 1.62 and 1.95 s; after the kernel's memory traffic was
+# cut, 8 steps an iteration took 1.035 s against 1.126 s for 4 (55 s to compile
+# against 31 s), and share 2 with 4 steps 1.14 s.
+STEPPING = {"cpu": (FULL_CHECK_SHARE, 1), "accelerator": (FULL_CHECK_SHARE, 8)}
 
 
 class _Lane(NamedTuple):
     """A lane's constants: its scene, task and settings, the start pose, the random
-    numbers drawn once, its task's space and aim point, the perfect user's path."""
+    numbers drawn once, its task's space (kind, centre, quaternion, dims, the cone's
+    trigonometry: the rotation matrix is made where used, which reads fewer numbers a
+    step than a stored one; the trigonometry costs more to recompute on a CPU) and aim
+    point, the perfect user's path (closest point, direction, length; the rest of
+    ``automaton.Path`` is p0 and numbers of the settings). Every step reads them all:
+    the move is bound by memory, so nothing is stored twice."""
 
     scene: Array
     target: Array
@@ -249,9 +289,18 @@ class _Lane(NamedTuple):
     perfect: Array
     step_key: Array
     once: RolloutDraws
-    own: shapes.Prepared
+    own: tuple[Array, Array, Array, Array, Array]
     aim: Array
-    path: am.Path
+    c0: Array
+    u: Array
+    length: Array
+
+
+def _path(lane: _Lane, step_length: Array) -> am.Path:
+    """The perfect user's straight path (``automaton.straight_path``'s numbers)."""
+    steps = lane.x.max_steps.astype(lane.length.dtype)
+    landing = jnp.minimum(jnp.ceil(lane.length / step_length), steps + 1.0)
+    return am.Path(lane.p0, lane.c0, lane.u, lane.length, landing, step_length)
 
 
 class _Move(NamedTuple):
@@ -260,9 +309,9 @@ class _Move(NamedTuple):
     full check."""
 
     k: Array
-    q: Array
-    p: Array
-    delta: Array
+    q: V3
+    p: V3
+    delta: V3
     travelled: Array
     moved: Array
 
@@ -286,9 +335,9 @@ class _Check(NamedTuple):
 
 class _State(NamedTuple):
     k: Array          # steps taken
-    q: Array          # commanded position (3,)
-    p: Array          # gripper position (3,)
-    last: Array       # the previous step's displacement (3,)
+    q: V3             # commanded position
+    p: V3             # gripper position
+    last: V3          # the previous step's displacement
     r: Array          # orientation (4,)
     meta_steps: Array
     travelled: Array  # path length of the commanded position, m
@@ -308,28 +357,41 @@ def _shake(lane: _Lane, k: Array) -> Array:
             * lane.once.tremor_axis)
 
 
+def _rotation(q: Array) -> tuple:
+    """``quaternion.to_matrix`` as nine separate entries, rows of a tuple (a stacked
+    matrix made XLA's CPU backend slower per step than reading a stored one)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
+
+
 def _move(lane: _Lane, s: _State) -> _Move:
-    """One step of the user, without any check (one lane)."""
-    x, dtype = lane.x, s.p.dtype
+    """One step of the user, without any check (one lane), on components."""
+    x, dtype = lane.x, s.k.dtype
     step_length = am.rollout_numbers(x, dtype)["step_length"]
-    c = jnp.where(x.user_aim_object, lane.aim, shapes.prepared_project(lane.own, s.p))
-    d = c - s.p
-    length = jnp.sqrt(jnp.dot(d, d))
+    kind, center, orientation, dims, trig = lane.own
+    closest = shapes.project_components(kind, center, _rotation(orientation), dims, trig, s.p)
+    c = _xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], closest[i]))
+    d = _xyz(lambda i: c[i] - s.p[i])
+    length = _length(d)
     moving = length > 0
-    u = d / jnp.where(moving, length, 1.0)
+    u = _xyz(lambda i: d[i] / jnp.where(moving, length, 1.0))
     draw = _step_draws(lane.step_key, s.k.astype(jnp.int32), dtype)
-    turned = turn_across(u, x.user_noise * draw.noise, draw.axis_angle)
-    fresh = jnp.where(moving, jnp.minimum(step_length, length) * turned, 0.0)
+    turned = _turn_across(u[0], u[1], u[2], x.user_noise * draw.noise, draw.axis_angle)
+    size = jnp.minimum(step_length, length)
     lagging = (s.k > 0) & (draw.lag < x.user_lag)
-    delta = jnp.where(lagging, s.last, fresh)
+    delta = _xyz(lambda i: jnp.where(lagging, s.last[i],
+                                     jnp.where(moving, size * turned[i], 0.0)))
     k = s.k + 1.0
-    q = s.q + delta
+    q = _xyz(lambda i: s.q[i] + delta[i])
     # A perfect user's lane takes the closed form's samples (the same points).
-    p = jnp.where(lane.perfect, am.sample(lane.path, k), q + _shake(lane, k))
-    travelled = jnp.where(lane.perfect, jnp.minimum(k * step_length, lane.path.length),
-                          s.travelled + jnp.sqrt(jnp.dot(delta, delta)))
-    gap = p - s.p
-    return _Move(k, q, p, delta, travelled, s.moved + jnp.sqrt(jnp.dot(gap, gap)))
+    sample, shake = am.sample(_path(lane, step_length), k), _shake(lane, k)
+    p = _xyz(lambda i: jnp.where(lane.perfect, sample[i], q[i] + shake[i]))
+    travelled = jnp.where(lane.perfect, jnp.minimum(k * step_length, lane.length),
+                          s.travelled + _length(delta))
+    gap = _xyz(lambda i: p[i] - s.p[i])
+    return _Move(k, q, p, delta, travelled, s.moved + _length(gap))
 
 
 def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r: Array,
@@ -406,10 +468,11 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
     dtype = p.dtype
     inf = jnp.asarray(jnp.inf, dtype)
     tau = n["tau"]
-    seg = p - s.p
-    seg_len = jnp.sqrt(jnp.dot(seg, seg))
+    start = jnp.stack(s.p)
+    seg = p - start
+    seg_len = _length(seg)
     along = seg / jnp.where(seg_len > 0, seg_len, 1.0)
-    lo, hi = shapes.all_ray_intervals(spaces, s.p, along, n["grow"])
+    lo, hi = shapes.all_ray_intervals(spaces, start, along, n["grow"])
     enters = mask & (lo <= hi) & (lo <= seg_len) & (hi >= 0) & (seg_len > 0)
     # The intervals contain the spaces' tau-sublevel sets (a little more, near edges):
     # from the first interval's start, steps that never pass an entry reach the first
@@ -422,7 +485,7 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
     t_hit = jnp.where(jnp.isfinite(t_hit), t_hit, 0.0)
 
     def gaps(t):
-        return jnp.where(mask, shapes.all_sdf(spaces, s.p + t * along), inf) - tau
+        return jnp.where(mask, shapes.all_sdf(spaces, start + t * along), inf) - tau
 
     def trace(_, t):
         gap, slope = jax.jvp(gaps, (t,), (jnp.ones_like(t),))
@@ -431,7 +494,7 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
         return t + jnp.maximum(jnp.maximum(jnp.min(gap), 0.0), jnp.min(newton))
 
     t_hit = jax.lax.fori_loop(0, SPHERE_TRACING_STEPS, trace, t_hit)
-    p_hit = s.p + t_hit * along
+    p_hit = start + t_hit * along
     sd_hit = jnp.where(mask, shapes.all_sdf(spaces, p_hit), inf)
     # The entry point lies on the boundary of tau; rounding may put it a hair outside,
     # which the closed form's interval slack covers.
@@ -441,12 +504,14 @@ def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, 
     p = jnp.where(swept, p_hit, p)
     active = jnp.where(swept, act_hit, active)
     sd = jnp.where(swept, sd_hit, sd)
-    step_len = jnp.sqrt(jnp.dot(m.delta, m.delta))
+    step_len = _length(m.delta)
     travelled = jnp.where(swept, s.travelled + step_len
                           * (t_hit / jnp.where(seg_len > 0, seg_len, 1.0)), m.travelled)
     return p, active, sd, travelled
-def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, populations: bool,
-           scene: Array, start: Array, target: Array) -> _Lane:
+
+
+def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, which: str,
+           populations: bool, scene: Array, start: Array, target: Array) -> _Lane:
     """One lane's constants (vmapped over a block); with ``populations``, its drawn user
     settings."""
     pick = (lambda a: a[scene])  # noqa: E731
@@ -460,11 +525,37 @@ def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, populati
     x = x._replace(user_dist=jnp.zeros((), jnp.int32), user_dist_args=jnp.zeros((), dtype),
                    user_dist_values=jnp.zeros((), dtype))
     n = am.rollout_numbers(x, dtype)
-    own = jax.tree.map(lambda a: a[target], sp)
+    own = (g.kind[target], getattr(g, f"center_{which}")[target],
+           getattr(g, f"quat_{which}")[target], getattr(g, f"dims_{which}")[target],
+           sp.trig[target])
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
     return _Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
-                 _step_key(key), rollout_draws(key, dtype),
-                 own, g.aim_point[target], path)
+                 _step_key(key), rollout_draws(key, dtype), own, g.aim_point[target],
+                 path.c0, path.u, path.length)
+
+
+def _first(mask: Array, size: int) -> tuple[Array, Array, Array]:
+    """The indices of the first ``size`` true entries of ``mask`` (B,) in order, 0 after
+    them; where each index is to be written back (B + i past their count: dropped); and
+    which entries were taken.
+    A scatter of the entries' positions with unique indices, which the GPU writes in
+    parallel: ``jnp.nonzero`` with a size is a scatter that XLA may not assume unique,
+    61 us a step at 2^19 lanes on an H100, the largest kernel of the loop."""
+    B = mask.shape[0]
+    lane = jnp.arange(B, dtype=jnp.int32)
+    pos = jnp.cumsum(mask, dtype=jnp.int32) - 1
+    taken = mask & (pos < size)
+    idx = jnp.zeros(size, jnp.int32).at[jnp.where(taken, pos, size + lane)].set(
+        lane, mode="drop", unique_indices=True)
+    slots = jnp.arange(size, dtype=jnp.int32)
+    count = jnp.minimum(pos[-1] + 1, size)
+    return idx, jnp.where(slots < count, idx, B + slots), taken
+
+
+def _put(a: Array, at: Array, v: Array) -> Array:
+    """``a`` with the lanes ``at`` (last axis; out of range: dropped) set to ``v``; the
+    indices are unique (:func:`_first`)."""
+    return a.at[..., at].set(v, mode="drop", unique_indices=True)
 
 
 class _Result(NamedTuple):
@@ -528,7 +619,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     # small vectors are then rows of whole arrays, which XLA vectorises across lanes.
     # The hulls are read where the gripper is near a mesh, not gathered for every lane.
     per_lane = geometry._replace(obj_hull=None, obj_hull_plane=None)  # type: ignore[arg-type]
-    make = jax.vmap(partial(_lanes, per_lane, params, spaces, populations), out_axes=-1)
+    make = jax.vmap(partial(_lanes, per_lane, params, spaces, which, populations), out_axes=-1)
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):
@@ -565,7 +656,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         first = lanes(check)(lane, p_start, lane.r0)
         zero = jnp.zeros(n, dtype)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
-        return lane, _State(zero, lane.p0, first.p, jnp.zeros((3, n), dtype), lane.r0,
+        return lane, _State(zero, _v3(lane.p0), _v3(first.p), (zero, zero, zero), lane.r0,
                             jnp.zeros(n, jnp.int32), zero, first.done, first.hit,
                             first.active, first.sd, first.clear, zero, live)
 
@@ -575,21 +666,23 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         code = jnp.where(e.hit, COLLISION, code)
         activated = jnp.where(e.hit, -1, activated)
         k = jnp.where(e.done, e.k, ln.x.max_steps.astype(dtype))
-        return _Result(code, activated, k.astype(jnp.int32), e.p, e.travelled, e.r,
+        return _Result(code, activated, k.astype(jnp.int32), jnp.stack(e.p), e.travelled, e.r,
                        e.meta_steps)
 
     def write(result, slot, lane, state, which_slots, valid):
         """Write the answers of the slots ``which_slots`` (where ``valid``)."""
         pick = (lambda a: a[..., which_slots])  # noqa: E731
         done = jax.vmap(finish, in_axes=-1)(jax.tree.map(pick, lane), jax.tree.map(pick, state))
-        at = jnp.where(valid, slot[which_slots], L)
-        return jax.tree.map(lambda a, v: a.at[at].set(v, mode="drop"), result, done)
+        at = jnp.where(valid, slot[which_slots],
+                       L + jnp.arange(which_slots.shape[0], dtype=jnp.int32))
+        return jax.tree.map(lambda a, v: a.at[at].set(v, mode="drop", unique_indices=True),
+                            result, done)
 
     def step(s: _State, lane: _Lane) -> _State:
         m = lanes(_move)(lane, s)
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
-        full = lanes(lambda ln, st, mv: check(ln, mv.p, st.r, (st, mv)))
+        full = lanes(lambda ln, st, mv: check(ln, jnp.stack(mv.p), st.r, (st, mv)))
         if F >= B:  # every lane checked: no gathering (the accelerators)
             got = need
             c = full(lane, s, m)
@@ -598,23 +691,21 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
             def put(a, v):
                 return jnp.where(got, v, a)
         else:
-            got = need & (jnp.cumsum(need, dtype=jnp.int32) <= F)
-            idx = jnp.nonzero(got, size=F, fill_value=0)[0].astype(jnp.int32)
+            idx, at, got = _first(need, F)
             pick = (lambda a: a[..., idx])  # noqa: E731
             sub_s, sub_m, sub_lane = (jax.tree.map(pick, t) for t in (s, m, lane))
             c = full(sub_lane, sub_s, sub_m)
-            at = jnp.where(jnp.arange(F, dtype=jnp.int32) < jnp.sum(got, dtype=jnp.int32),
-                           idx, B)
 
             def put(a, v):
-                return a.at[..., at].set(v, mode="drop")
+                return _put(a, at, v)
 
         go = s.live & (~need | got)
 
         def adv(new, old):
-            return jnp.where(go, new, old)
+            return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, old)
 
-        t = _State(adv(m.k, s.k), adv(m.q, s.q), adv(put(m.p, c.p), s.p),
+        p_new = tuple(put(m.p[i], c.p[i]) for i in range(3))
+        t = _State(adv(m.k, s.k), adv(m.q, s.q), adv(p_new, s.p),
                    adv(m.delta, s.last), put(s.r, c.r),
                    put(s.meta_steps, sub_s.meta_steps + c.counted.astype(jnp.int32)),
                    adv(put(m.travelled, c.travelled), s.travelled),
@@ -630,17 +721,15 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         queue."""
         state = c.state
         free = (c.slot >= 0) & ~state.live
-        chosen = free & (jnp.cumsum(free, dtype=jnp.int32) <= R)
-        idx = jnp.nonzero(chosen, size=R, fill_value=0)[0].astype(jnp.int32)
-        n_free = jnp.sum(chosen, dtype=jnp.int32)
+        idx, at, _ = _first(free, R)
+        n_free = jnp.minimum(jnp.sum(free, dtype=jnp.int32), R)
         slots = jnp.arange(R, dtype=jnp.int32)
         result = write(c.result, c.slot, c.lane, state, idx, slots < n_free)
         n_new = jnp.minimum(n_free, n_real - c.next)
         new = slots < n_new
         ids = order[jnp.minimum(c.next + slots, L - 1)]
         lane_new, state_new = begin(ids, new)
-        at = jnp.where(slots < n_free, idx, B)
-        put = (lambda a, v: a.at[..., at].set(v, mode="drop"))  # noqa: E731
+        put = (lambda a, v: _put(a, at, v))  # noqa: E731
         slot = put(c.slot, jnp.where(new, ids, -1))
         return _Pass(jax.tree.map(put, c.lane, lane_new), jax.tree.map(put, state, state_new),
                      slot, c.next + n_new, result)

@@ -160,3 +160,36 @@ def test_component_form_matches_vectorised_form_and_layouts():
     grid = pts.T.reshape(3, 1, 2, -1)
     laid_out = shapes.prepared_sdf(c, grid)  # (T, 2, P/2)
     np.testing.assert_allclose(laid_out.reshape(len(CASES), -1), per_point.T, atol=1e-6)
+
+
+def test_projection_on_components_matches_vectorised_form():
+    """prepared_project (scalar components, the stepped users' move) equals the
+    vectorised per-kind closest points of sdf_and_project_local mapped back to the
+    world, for points inside, outside and on the axis of every kind, and its rotation
+    may be given as rows of entries (the move's, made from a quaternion)."""
+    columns = zip(*(args(s) for s in CASES), strict=True)
+    prepared = shapes.prepare_all(*(jnp.stack(a) for a in columns))
+    pts = np.concatenate([points_around(s, 200, seed=i) for i, s in enumerate(CASES)])
+    # Points on each shape's axis (rho = 0), where the azimuth is undefined.
+    axis = np.asarray(prepared.center)[:, None, :] + np.linspace(-0.2, 0.2, 9)[None, :, None] \
+        * np.asarray(prepared.rot)[:, None, :, 2]
+    pts = jnp.asarray(np.concatenate([pts, axis.reshape(-1, 3)]), jnp.float32)
+
+    def vectorised(sp, p):
+        local = jnp.sum(sp.rot.T * (p - sp.center)[None, :], axis=1)
+        closest = shapes.sdf_and_project_local(sp.kind, sp.dims, sp.trig, local)[1]
+        return sp.center + jnp.sum(sp.rot * closest[None, :], axis=1)
+
+    each = jax.vmap(shapes.prepared_project, (0, None))
+    got = jax.jit(jax.vmap(lambda p: each(prepared, p)))(pts)  # (P, T, 3)
+    reference = jax.jit(jax.vmap(lambda p: jax.vmap(vectorised, (0, None))(prepared, p)))(pts)
+    np.testing.assert_allclose(got, reference, atol=2e-6)
+    assert np.isfinite(np.asarray(got)).all()
+
+    def rows(sp, p):
+        r = tuple(tuple(sp.rot[i, j] for j in range(3)) for i in range(3))
+        return jnp.stack(shapes.project_components(sp.kind, sp.center, r, sp.dims, sp.trig,
+                                                   (p[0], p[1], p[2])))
+
+    as_rows = jax.jit(jax.vmap(lambda p: jax.vmap(rows, (0, None))(prepared, p)))(pts)
+    np.testing.assert_array_equal(as_rows, got)
