@@ -318,16 +318,16 @@ class _Move(NamedTuple):
 
 class _Check(NamedTuple):
     """A full check's answers at the gripper: its position (the entry point under the
-    swept check), the path length, ended (activated or collided), collided, the active
-    set and sdfs, R after the meta skill's turn, whether the step counts as a meta step,
-    the clearance."""
+    swept check), the path length, ended (activated or collided), the outcome code and
+    activated task should it have ended (``automaton.outcome_codes``; a collision's
+    code and -1), R after the meta skill's turn, whether the step counts as a meta
+    step, the clearance."""
 
     p: Array
     travelled: Array
     done: Array
-    hit: Array
-    active: Array
-    sd: Array
+    code: Array
+    activated: Array
     r: Array
     counted: Array
     clear: Array
@@ -342,10 +342,9 @@ class _State(NamedTuple):
     meta_steps: Array
     travelled: Array  # path length of the commanded position, m
     done: Array       # activated or collided
-    hit: Array        # collided
-    active: Array     # (T,) the active set at the last full check
-    sd: Array         # (T,) the sdfs there
-    clear: Array      # the clearance found there
+    code: Array       # the outcome code where done (a check's answer, not the T sdfs:
+    activated: Array  # writing those back was a tenth of a step's time on a GPU)
+    clear: Array      # the clearance found at the last full check
     moved: Array      # the gripper's path since, m
     live: Array       # still stepping
 
@@ -435,6 +434,10 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
         gap = jnp.min(jnp.where(mask, apart, inf)) - col.gripper_reach(dims)
         clear = jnp.where(x.collision, jnp.minimum(clear, gap + tau), clear)
     done = jnp.any(active) | hit
+    code, activated = am.outcome_codes(am.Activation(jnp.zeros((), dtype), active, sd),
+                                       lane.target, x.ambiguity_nearest)
+    code = jnp.where(hit, COLLISION, code)
+    activated = jnp.where(hit, -1, activated)
     counted = jnp.zeros((), bool)
     if track:
         init, opt, fixed_dir = meta
@@ -459,7 +462,7 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
             turned = jnp.where(inside, quat.rotate_towards(r, goal, n["max_angle"]), r)
             r = jnp.where(done, r, turned)
             counted = inside & ~done
-    return _Check(p, travelled, done, hit, active, sd, r, counted, clear)
+    return _Check(p, travelled, done, code, activated, r, counted, clear)
 
 
 def _swept_entry(spaces, mask, lane: _Lane, s: _State, m: _Move, p, active, sd, n):
@@ -657,14 +660,12 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         zero = jnp.zeros(n, dtype)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
         return lane, _State(zero, _v3(lane.p0), _v3(first.p), (zero, zero, zero), lane.r0,
-                            jnp.zeros(n, jnp.int32), zero, first.done, first.hit,
-                            first.active, first.sd, first.clear, zero, live)
+                            jnp.zeros(n, jnp.int32), zero, first.done, first.code,
+                            first.activated, first.clear, zero, live)
 
     def finish(ln, e):
-        act = am.Activation(jnp.where(e.done, e.k, jnp.inf), e.active, e.sd)
-        code, activated = am.outcome_codes(act, ln.target, ln.x.ambiguity_nearest)
-        code = jnp.where(e.hit, COLLISION, code)
-        activated = jnp.where(e.hit, -1, activated)
+        code = jnp.where(e.done, e.code, am.TIMEOUT)
+        activated = jnp.where(e.done, e.activated, -1)
         k = jnp.where(e.done, e.k, ln.x.max_steps.astype(dtype))
         return _Result(code, activated, k.astype(jnp.int32), jnp.stack(e.p), e.travelled, e.r,
                        e.meta_steps)
@@ -709,8 +710,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                    adv(m.delta, s.last), put(s.r, c.r),
                    put(s.meta_steps, sub_s.meta_steps + c.counted.astype(jnp.int32)),
                    adv(put(m.travelled, c.travelled), s.travelled),
-                   put(s.done, c.done), put(s.hit, c.hit), put(s.active, c.active),
-                   put(s.sd, c.sd),
+                   put(s.done, c.done), put(s.code, c.code), put(s.activated, c.activated),
                    put(s.clear, c.clear), adv(put(m.moved, jnp.zeros_like(c.clear)), s.moved),
                    s.live)
         steps = lane.x.max_steps.astype(dtype)
