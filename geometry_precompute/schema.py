@@ -218,10 +218,10 @@ class Layout:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
-    samples (``shacc_jax.lanes``). ``stepping`` (None: the backend's,
-    ``shacc_jax.users.STEPPING``): the stepped program's (share, steps), a 1 / share of
-    the slots checked in full per step and that many steps per loop iteration; the
-    answers are the same for every value.
+    samples (``shacc_jax.lanes``). ``stepping`` (None: the mode's and the backend's,
+    ``shacc_jax.users.FULL_CHECK_SHARE`` and ``STEPPING``): the stepped program's
+    (share, steps) for every mode, a 1 / share of the slots checked in full per step and
+    that many steps per loop iteration; the answers are the same for every value.
     """
 
     n_tasks: int

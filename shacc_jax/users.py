@@ -255,20 +255,23 @@ def _components_first(sp: shapes.Prepared) -> shapes.Prepared:
 # ``clear`` away is at least clear - m from each. Steps with clear - m > tau + this
 # margin (m; it covers rounding) cannot activate a space nor turn R, and skip the check.
 CLEARANCE_MARGIN = 1e-4
-# A block checks in full at most this share of its lanes per step; a lane that needs a
-# full check and finds no place waits a step (its rollout is unchanged by waiting).
-FULL_CHECK_SHARE = 4
+# A block checks in full at most a 1 / share of its lanes per step (1: all, without
+# gathering the others out); a lane that needs a full check and finds no place waits a
+# step (its rollout is unchanged by waiting). The mode with the meta skill needs a full
+# check on about 40 % of its live steps (inside a meta region R turns every step), the
+# others on about 8 %.
+FULL_CHECK_SHARE = {"meta": 4, "other": 8}
 # A refill gives at most this share of the slots new lanes; it waits until that many
 # are free (or none is live).
-REFILL_SHARE = 16
-# Per backend: the share of lanes checked in full per step (1: all, without gathering
-# the others out), and the steps per loop iteration (each iteration costs a
-# device-to-host round trip for its condition on an accelerator). Measured on an H100,
-# 10.8 M rollouts, 2^19 slots (benchmarks/RESULTS.md): with 4 steps an iteration,
-# shares 1, 4 and 8 took 2.30, 1.62 and 1.95 s; after the kernel's memory traffic was
-# cut, 8 steps an iteration took 1.035 s against 1.126 s for 4 (55 s to compile
-# against 31 s), and share 2 with 4 steps 1.14 s.
-STEPPING = {"cpu": (FULL_CHECK_SHARE, 1), "accelerator": (FULL_CHECK_SHARE, 8)}
+REFILL_SHARE = 4
+# Per backend, the steps per loop iteration (each iteration costs a device-to-host
+# round trip for its condition on an accelerator). Measured on an H100, 10.8 M
+# rollouts, 2^19 slots (benchmarks/RESULTS.md): with 4 steps an iteration and a share of
+# 4 for every mode, shares 1, 4 and 8 took 2.30, 1.62 and 1.95 s; after the kernel's
+# memory traffic was cut, 8 steps an iteration took 1.035 s against 1.126 s for 4 (55
+# s to compile against 31 s); with the shares above and refills of a quarter of the
+# slots (were a sixteenth), 0.971 s.
+STEPPING = {"cpu": 1, "accelerator": 8}
 
 
 class _Lane(NamedTuple):
@@ -597,7 +600,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     scene, start, task). Each step moves every live lane (``_move``); the lanes whose
     clearance allows it skip the check, and at most a 1 / share of the slots are
     gathered and checked in full (``_check``; the share and the steps per loop
-    iteration are ``stepping``, or the backend's :data:`STEPPING`; ``populations``: the
+    iteration are ``stepping``, or the mode's :data:`FULL_CHECK_SHARE` and the
+    backend's :data:`STEPPING`; ``populations``: the
     lanes draw their user settings, :func:`with_population`). A slot whose rollout
     has ended (an activation, a collision or max_steps) writes its answers and takes the
     next lane of the queue, once a 1 / REFILL_SHARE of the slots are free. The queue
@@ -634,7 +638,8 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
     order = jnp.argsort(-jax.vmap(landing)(scene, start, task)).astype(jnp.int32)
     n_real = (jnp.sum(geometry.task_mask) * N).astype(jnp.int32)
     B = min(lanes_per_block, L)
-    share, unroll = stepping or STEPPING[backend if backend in STEPPING else "accelerator"]
+    share, unroll = stepping or (FULL_CHECK_SHARE["meta" if track else "other"],
+                                 STEPPING[backend if backend in STEPPING else "accelerator"])
     F = max(1, B // share)
     R = max(1, B // REFILL_SHARE)
 

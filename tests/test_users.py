@@ -164,17 +164,18 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
 
 
 def test_the_accelerators_stepping_gives_the_same_rollouts(scenes):
-    """The accelerators step differently (every lane checked in full each step, four
-    steps per loop iteration, users.STEPPING); run here on the CPU (Layout.stepping),
-    their rollouts equal the CPU's scheme (a share of lanes gathered and checked, one
-    step per iteration) bit for bit, in every mode, on a batch that mixes perfect users
-    with imperfect ones (the schemes differ in the loop, not in a step's check)."""
+    """The accelerators step differently (several steps per loop iteration,
+    users.STEPPING); run here on the CPU (Layout.stepping), with every lane checked in
+    full each step, their rollouts equal the CPU's scheme (a share of lanes gathered and
+    checked, one step per iteration) bit for bit, in every mode, on a batch that mixes
+    perfect users with imperfect ones (the schemes differ in the loop, not in a step's
+    check)."""
     users_per_scene = [{}, USERS["all"], {}, USERS["object-noisy"]]
     baked = bake([replace(r, settings=r.settings.with_overrides(o))
                   for r, o in zip(scenes, users_per_scene, strict=True)])
     ours = _evaluate(baked, stepped_users=True, lanes_per_block=40)
     theirs = _evaluate(baked, stepped_users=True, lanes_per_block=40,
-                       stepping=users.STEPPING["accelerator"])
+                       stepping=(1, users.STEPPING["accelerator"]))
     assert users.STEPPING["accelerator"] != users.STEPPING["cpu"]
     for field in ours.rollouts._fields:
         a, b = getattr(ours.rollouts, field), getattr(theirs.rollouts, field)
