@@ -163,10 +163,11 @@ def test_component_form_matches_vectorised_form_and_layouts():
 
 
 def test_projection_on_components_matches_vectorised_form():
-    """prepared_project (scalar components, the stepped users' move) equals the
-    vectorised per-kind closest points of sdf_and_project_local mapped back to the
-    world, for points inside, outside and on the axis of every kind, and its rotation
-    may be given as rows of entries (the move's, made from a quaternion)."""
+    """project_components (scalar components, the stepped users' move) equals
+    prepared_project (the vectorised per-kind closest points of sdf_and_project_local
+    mapped back to the world) to float rounding, for points inside, outside and on the
+    axis of every kind; and its rotation may be given as rows of entries (the move's,
+    made from a quaternion) with the same result."""
     columns = zip(*(args(s) for s in CASES), strict=True)
     prepared = shapes.prepare_all(*(jnp.stack(a) for a in columns))
     pts = np.concatenate([points_around(s, 200, seed=i) for i, s in enumerate(CASES)])
@@ -175,21 +176,15 @@ def test_projection_on_components_matches_vectorised_form():
         * np.asarray(prepared.rot)[:, None, :, 2]
     pts = jnp.asarray(np.concatenate([pts, axis.reshape(-1, 3)]), jnp.float32)
 
-    def vectorised(sp, p):
-        local = jnp.sum(sp.rot.T * (p - sp.center)[None, :], axis=1)
-        closest = shapes.sdf_and_project_local(sp.kind, sp.dims, sp.trig, local)[1]
-        return sp.center + jnp.sum(sp.rot * closest[None, :], axis=1)
-
-    each = jax.vmap(shapes.prepared_project, (0, None))
-    got = jax.jit(jax.vmap(lambda p: each(prepared, p)))(pts)  # (P, T, 3)
-    reference = jax.jit(jax.vmap(lambda p: jax.vmap(vectorised, (0, None))(prepared, p)))(pts)
-    np.testing.assert_allclose(got, reference, atol=2e-6)
-    assert np.isfinite(np.asarray(got)).all()
-
-    def rows(sp, p):
-        r = tuple(tuple(sp.rot[i, j] for j in range(3)) for i in range(3))
+    def components(sp, p, rows=False):
+        r = tuple(tuple(sp.rot[i, j] for j in range(3)) for i in range(3)) if rows else sp.rot
         return jnp.stack(shapes.project_components(sp.kind, sp.center, r, sp.dims, sp.trig,
                                                    (p[0], p[1], p[2])))
 
-    as_rows = jax.jit(jax.vmap(lambda p: jax.vmap(rows, (0, None))(prepared, p)))(pts)
-    np.testing.assert_array_equal(as_rows, got)
+    def each(fn):
+        return jax.jit(jax.vmap(lambda p: jax.vmap(fn, (0, None))(prepared, p)))(pts)
+
+    got = each(components)  # (P, T, 3)
+    np.testing.assert_allclose(got, each(shapes.prepared_project), atol=2e-6)
+    assert np.isfinite(np.asarray(got)).all()
+    np.testing.assert_array_equal(each(lambda sp, p: components(sp, p, rows=True)), got)
