@@ -70,12 +70,17 @@ def normalize(q: Float[Array, "4"]) -> Float[Array, "4"]:
 
 
 def to_matrix(q: Float[Array, "4"]) -> Float[Array, "3 3"]:
-    w, x, y, z = q
-    return jnp.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return jnp.array(matrix_entries(q))
+
+
+def matrix_entries(q: Float[Array, "4"]) -> tuple:
+    """:func:`to_matrix`'s nine entries as rows of a tuple, not stacked: vmapped, each
+    entry is a plain row of the batch (a stacked matrix made XLA's CPU backend slower
+    per step of the stepped users than reading a stored one)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
 
 
 def from_matrix(m: Float[Array, "3 3"]) -> Float[Array, "4"]:

@@ -359,21 +359,13 @@ def _shake(lane: _Lane, k: Array) -> Array:
             * lane.once.tremor_axis)
 
 
-def _rotation(q: Array) -> tuple:
-    """``quaternion.to_matrix`` as nine separate entries, rows of a tuple (a stacked
-    matrix made XLA's CPU backend slower per step than reading a stored one)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
-
-
 def _move(lane: _Lane, s: _State) -> _Move:
     """One step of the user, without any check (one lane), on components."""
     x, dtype = lane.x, s.k.dtype
     step_length = am.rollout_numbers(x, dtype)["step_length"]
     kind, center, orientation, dims, trig = lane.own
-    closest = shapes.project_components(kind, center, _rotation(orientation), dims, trig, s.p)
+    rot = quat.matrix_entries(orientation)
+    closest = shapes.project_components(kind, center, rot, dims, trig, s.p)
     c = _xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], closest[i]))
     d = _xyz(lambda i: c[i] - s.p[i])
     length = _length(d)
@@ -689,7 +681,7 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
         full = lanes(lambda ln, st, mv: check(ln, jnp.stack(mv.p), st.r, (st, mv)))
-        if F >= B:  # every lane checked: no gathering (the accelerators)
+        if F >= B:  # share 1, every lane checked: no gathering
             got = need
             c = full(lane, s, m)
             sub_s = s
