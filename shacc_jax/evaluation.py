@@ -270,14 +270,33 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
 
 def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     """Per mode (Outcome, R, meta steps) of a batch with imperfect simulated users:
-    every rollout stepped (``users.stepped_pass``)."""
+    every rollout stepped (``users.stepped_pass``).
+
+    The shrinking and shacc modes move through the same spaces with the same random
+    numbers, and the meta skill turns only R: without collision checks (where R moves
+    the gripper's capsules) their paths and outcomes are the same, so one pass with the
+    meta skill serves both, as the closed form's activation pass does, and the
+    shrinking mode keeps the start's R and no meta steps."""
     lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
         jax.default_backend(), stepped_users=True)
-    return [users.stepped_pass(geometry, params, "init" if mode == "baseline" else "opt",
-                               mode == "shacc", layout.meta_formula, lanes_per_block,
-                               layout.swept_checks, jax.default_backend(),
-                               layout.collision_checks, layout.stepping, layout.populations)
-            for mode in layout.modes]
+    modes = layout.modes
+    shared = "shrinking" in modes and "shacc" in modes and not layout.collision_checks
+    passes = {}
+    for mode in modes:
+        if mode == "shrinking" and shared:
+            continue
+        passes[mode] = users.stepped_pass(
+            geometry, params, "init" if mode == "baseline" else "opt", mode == "shacc",
+            layout.meta_formula, lanes_per_block, layout.swept_checks, jax.default_backend(),
+            layout.collision_checks, layout.stepping, layout.populations)
+    if shared:
+        out = passes["shacc"][0]
+        S, N, T = out.code.shape
+        real = geometry.task_mask[:, None, :, None]  # a padded task's R stays zero
+        r0 = jnp.where(real, geometry.starts[:, :, None, 3:], 0.0)
+        passes["shrinking"] = (out, jnp.broadcast_to(r0, (S, N, T, 4)).astype(out.point.dtype),
+                               jnp.zeros((S, N, T), jnp.int32))
+    return [passes[mode] for mode in modes]
 
 
 def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
