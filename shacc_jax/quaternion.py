@@ -139,6 +139,30 @@ def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
     return jnp.where(theta <= max_angle, t, stepped)
 
 
+def turn_towards(q: Float[Array, "4"], target: Float[Array, "4"],
+                 half_turn: tuple[Array, Array]) -> Float[Array, "4"]:
+    """:func:`rotate_towards` written without inverse trigonometry, given (sin, cos) of
+    half of ``max_angle``: within ``max_angle`` (|<q, target>| >= cos(max_angle / 2))
+    the target, else q turned by ``max_angle`` about the relative rotation's axis, q
+    (cos(max_angle / 2), sin(max_angle / 2) v / |v|): the slerp's point, since
+    slerp(q, t, f) = q (q^-1 t)^f and f times the half angle is max_angle / 2. The
+    same ties. Equal to :func:`rotate_towards` up to rounding (tests/test_quaternion.py);
+    the stepped users take it, whose CPU kernel pays a libm call per element for each
+    arccos and sine (``trig`` module docstring), while the closed form keeps the slerp
+    its recorded answers were made with."""
+    sin_m, cos_m = half_turn
+    d = dot(q, target)
+    v = multiply(conjugate(q), target)[1:]
+    tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
+                         jnp.where(v[1] != 0, jnp.sign(v[1]), jnp.where(v[2] < 0, -1.0, 1.0)))
+    sign = jnp.where(jnp.abs(d) > 8 * _eps(q), jnp.sign(d), tie_sign)
+    n = jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    scale = sign * sin_m / jnp.where(n > 0, n, 1.0)
+    stepped = normalize(multiply(q, jnp.stack([cos_m, scale * v[0], scale * v[1],
+                                               scale * v[2]])))
+    return jnp.where(jnp.abs(d) >= cos_m, target * sign, stepped)
+
+
 def markley_average(quats: Float[Array, "n 4"], weights: Float[Array, " n"],
                     squarings: int = 24) -> Float[Array, "4"]:
     """Weighted quaternion average of Markley et al. 2007 (reference/model): the unit

@@ -34,7 +34,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jax.extend.random import threefry_2x32
 from jaxtyping import Array, Bool, Float, Int
 
 from geometry_precompute.population import NORMAL, POPULATED, UNIFORM, VALUES
@@ -44,6 +43,7 @@ from . import collision as col
 from . import quaternion as quat
 from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
+from .trig import sincos
 from .types import COLLISION, Geometry, Params
 
 # Sphere-tracing steps from a step's first interval entry to the entry into a space
@@ -99,10 +99,39 @@ def _step_key(key: Array) -> Array:
 
 
 def _step_draws(step_key: Array, k: Int[Array, ""], dtype) -> StepDraws:
+    return _draws_of(_step_words(step_key, k), dtype)
+
+
+def _step_words(step_key: Array, k: Int[Array, ""]) -> tuple[Array, Array, Array]:
+    """The three 32-bit words of step k: the first word of the threefry blocks with
+    counters (k, 0) and (k, 1), then the second word of the first (``threefry_2x32`` of
+    the counters [k, k, 0, 1], its first three words)."""
     kk = k.astype(jnp.uint32)
-    count = jnp.stack([kk, kk, jnp.zeros_like(kk), jnp.ones_like(kk)])
-    words = threefry_2x32(step_key, count)
-    u = (words[:3] >> 8).astype(jnp.float32) * (1.0 / (1 << 24))
+    a0, a1 = _threefry(step_key[0], step_key[1], kk, jnp.zeros_like(kk))
+    b0, _ = _threefry(step_key[0], step_key[1], kk, jnp.ones_like(kk))
+    return a0, b0, a1
+
+
+# Threefry-2x32 of Salmon et al. (2011), 20 rounds, as JAX computes it.
+_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
+
+
+def _threefry(k0: Array, k1: Array, x0: Array, x1: Array) -> tuple[Array, Array]:
+    """One threefry-2x32 block, written out: equal bit for bit to ``threefry_2x32``
+    (tests/test_users.py), which on a CPU runs as a loop of five iterations, each a
+    dozen small loops over the batch."""
+    ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(0x1BD11BDA))
+    x0, x1 = x0 + ks[0], x1 + ks[1]
+    for i in range(5):
+        for r in _ROTATIONS[i % 2]:
+            x0 = x0 + x1
+            x1 = ((x1 << jnp.uint32(r)) | (x1 >> jnp.uint32(32 - r))) ^ x0
+        x0, x1 = x0 + ks[(i + 1) % 3], x1 + ks[(i + 2) % 3] + jnp.uint32(i + 1)
+    return x0, x1
+
+
+def _draws_of(words: tuple[Array, Array, Array], dtype) -> StepDraws:
+    u = (jnp.stack(words) >> 8).astype(jnp.float32) * (1.0 / (1 << 24))
     noise = jnp.sqrt(2.0) * jax.scipy.special.erfinv(u[0])
     return StepDraws(noise.astype(dtype), (2.0 * jnp.pi * u[1]).astype(dtype), u[2].astype(dtype))
 
@@ -189,8 +218,8 @@ def drawn_values(geometry: Geometry, params: Params) -> Float[Array, "N T 4"]:
 
 
 def turn_across(u: Float[Array, "3"], angle: Array, axis_angle: Array) -> Float[Array, "3"]:
-    """The unit vector u turned by ``angle`` about the axis a = cos(psi) e1 + sin(psi)
-    e2 across it, psi = ``axis_angle``; (e1, e2, u) right-handed, e1 from the world x
+    """The unit vector u turned by ``angle`` about the axis a = cos(psi) e1 + sin(psi) e2
+    across it, psi = ``axis_angle``; (e1, e2, u) right-handed, e1 from the world x
     axis (the y axis where u is within 25 degrees of x). Rodrigues' formula with a
     perpendicular to u: u cos(angle) + (a x u) sin(angle).
 
@@ -199,12 +228,13 @@ def turn_across(u: Float[Array, "3"], angle: Array, axis_angle: Array) -> Float[
     >>> [round(float(x), 6) + 0.0 for x in v]
     [0.0, -1.0, 0.0]
     """
-    return jnp.stack(_turn_across(u[0], u[1], u[2], angle, axis_angle))
+    return jnp.stack(_turn_across(u[0], u[1], u[2], sincos(angle), sincos(axis_angle)))
 
 
-def _turn_across(ux, uy, uz, angle, axis_angle) -> tuple[Array, Array, Array]:
+def _turn_across(ux, uy, uz, angle_sc, axis_sc) -> tuple[Array, Array, Array]:
     """:func:`turn_across` on scalar components (vmapped over lanes, every intermediate
-    a plain row of the batch, no 3-vector products)."""
+    a plain row of the batch, no 3-vector products), given (sin, cos) of the angle and
+    of the axis' angle."""
     big = jnp.abs(ux) > 0.9
     hu = jnp.where(big, uy, ux)  # <h, u>
     e1x = jnp.where(big, 0.0, 1.0) - hu * ux
@@ -214,8 +244,7 @@ def _turn_across(ux, uy, uz, angle, axis_angle) -> tuple[Array, Array, Array]:
     e1x, e1y, e1z = e1x / n, e1y / n, e1z / n
     e2x, e2y, e2z = uy * e1z - uz * e1y, uz * e1x - ux * e1z, ux * e1y - uy * e1x
     # a x u = cos(psi) (e1 x u) + sin(psi) (e2 x u) = -cos(psi) e2 + sin(psi) e1
-    sp, cp = jnp.sin(axis_angle), jnp.cos(axis_angle)
-    ca, sa = jnp.cos(angle), jnp.sin(angle)
+    (sa, ca), (sp, cp) = angle_sc, axis_sc
     return (ca * ux + sa * (sp * e1x - cp * e2x), ca * uy + sa * (sp * e1y - cp * e2y),
             ca * uz + sa * (sp * e1z - cp * e2z))
 
@@ -352,35 +381,63 @@ class _State(NamedTuple):
     live: Array       # still stepping
 
 
-def _shake(lane: _Lane, k: Array) -> Array:
+def _wave(lane: _Lane, k: Array) -> Array:
+    """A sin(2 pi f k dt + phi), the tremor's displacement along its axis at step k. The
+    phase is reduced to whole cycles first (f dt k less its nearest integer), so a
+    long rollout's argument stays within a few radians (:func:`trig.sincos`)."""
     x = lane.x
-    omega_dt = 2.0 * jnp.pi * x.user_tremor_hz * x.dt
-    return (x.user_tremor * jnp.sin(omega_dt * k + lane.once.tremor_phase)
-            * lane.once.tremor_axis)
+    cycles = x.user_tremor_hz * x.dt * k
+    sin, _ = sincos(2.0 * jnp.pi * (cycles - jnp.round(cycles)) + lane.once.tremor_phase)
+    return x.user_tremor * sin
 
 
-def _move(lane: _Lane, s: _State) -> _Move:
-    """One step of the user, without any check (one lane), on components."""
+def _shake(lane: _Lane, k: Array) -> Array:
+    return _wave(lane, k) * lane.once.tremor_axis
+
+
+class _Aim(NamedTuple):
+    """What a step's move reads more than once, computed once (:func:`_move`): the
+    closest point of the task's space to the gripper, (sin, cos) of the noise angle and
+    of its axis' angle, the lag's uniform number, the tremor's displacement after the
+    step."""
+
+    closest: V3
+    angle: tuple[Array, Array]
+    axis: tuple[Array, Array]
+    lag: Array
+    wave: Array
+
+
+def _aim(lane: _Lane, s: _State) -> _Aim:
+    """The first half of a step (one lane): the closest point and the step's draws."""
     x, dtype = lane.x, s.k.dtype
-    step_length = am.rollout_numbers(x, dtype)["step_length"]
     kind, center, orientation, dims, trig = lane.own
     rot = quat.matrix_entries(orientation)
     closest = shapes.project_components(kind, center, rot, dims, trig, s.p)
-    c = _xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], closest[i]))
+    draw = _step_draws(lane.step_key, s.k.astype(jnp.int32), dtype)
+    return _Aim(closest, sincos(x.user_noise * draw.noise), sincos(draw.axis_angle), draw.lag,
+                _wave(lane, s.k + 1.0))
+
+
+def _move(lane: _Lane, s: _State, aim: _Aim) -> _Move:
+    """One step of the user, without any check (one lane), on components."""
+    x, dtype = lane.x, s.k.dtype
+    step_length = am.rollout_numbers(x, dtype)["step_length"]
+    c = _xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], aim.closest[i]))
     d = _xyz(lambda i: c[i] - s.p[i])
     length = _length(d)
     moving = length > 0
     u = _xyz(lambda i: d[i] / jnp.where(moving, length, 1.0))
-    draw = _step_draws(lane.step_key, s.k.astype(jnp.int32), dtype)
-    turned = _turn_across(u[0], u[1], u[2], x.user_noise * draw.noise, draw.axis_angle)
+    turned = _turn_across(u[0], u[1], u[2], aim.angle, aim.axis)
     size = jnp.minimum(step_length, length)
-    lagging = (s.k > 0) & (draw.lag < x.user_lag)
+    lagging = (s.k > 0) & (aim.lag < x.user_lag)
     delta = _xyz(lambda i: jnp.where(lagging, s.last[i],
                                      jnp.where(moving, size * turned[i], 0.0)))
     k = s.k + 1.0
     q = _xyz(lambda i: s.q[i] + delta[i])
     # A perfect user's lane takes the closed form's samples (the same points).
-    sample, shake = am.sample(_path(lane, step_length), k), _shake(lane, k)
+    sample = am.sample(_path(lane, step_length), k)
+    shake = _xyz(lambda i: aim.wave * lane.once.tremor_axis[i])
     p = _xyz(lambda i: jnp.where(lane.perfect, sample[i], q[i] + shake[i]))
     travelled = jnp.where(lane.perfect, jnp.minimum(k * step_length, lane.length),
                           s.travelled + _length(delta))
@@ -388,9 +445,16 @@ def _move(lane: _Lane, s: _State) -> _Move:
     return _Move(k, q, p, delta, travelled, s.moved + _length(gap))
 
 
+def _sdfs(spaces: shapes.Prepared, meta, p: Array, track: bool) -> tuple[Array, Array | None]:
+    """Every space's sdf at p (one lane), and with ``track`` every initial space's (the
+    meta region's)."""
+    own = shapes.all_sdf(spaces, p)
+    return own, shapes.prepared_sdf(meta[0], p[:, None]) if track else None
+
+
 def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r: Array,
            track: bool, formula: str, swept_checks: bool, collide: bool,
-           step=None, hulls: col.Hulls | None = None) -> _Check:
+           step=None, hulls: col.Hulls | None = None, sd=None) -> _Check:
     """The full check at the gripper position p (one lane): every space's sdf and the
     activation; with ``step`` (the state before and the move), the swept check's entry
     point (traced only where ``swept_checks``) and the meta skill's turn of R. With
@@ -398,16 +462,15 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
     capsules at (p, R before the turn) against the objects first: a penetration ends
     the rollout as a collision, without activating or turning. ``g``, ``spaces``,
     ``meta``: the lane's scene; ``hulls``: the batch's mesh hulls (not gathered per lane:
-    a mesh is read only where the gripper is near it)."""
+    a mesh is read only where the gripper is near it); ``sd``: the sdfs at p
+    (:func:`_sdfs`) where the caller has them."""
     x, dtype = lane.x, p.dtype
     n = am.rollout_numbers(x, dtype)
     tau = n["tau"]
     inf = jnp.asarray(jnp.inf, dtype)
 
-    def sdfs(point):
-        return jnp.where(g.task_mask, shapes.all_sdf(spaces, point), inf)
-
-    sd = sdfs(p)
+    own, sd_init = sd if sd is not None else _sdfs(spaces, meta, p, track)
+    sd = jnp.where(g.task_mask, own, inf)
     active = sd <= tau
     travelled = jnp.zeros((), dtype) if step is None else step[1].travelled
     if step is not None and swept_checks:
@@ -435,10 +498,10 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
     activated = jnp.where(hit, -1, activated)
     counted = jnp.zeros((), bool)
     if track:
+        assert sd_init is not None  # _sdfs gives it where track
         init, opt, fixed_dir = meta
         member = g.task_mask & (g.cluster >= 0)
         pp = p[:, None]  # (components, tasks)
-        sd_init = shapes.prepared_sdf(init, pp)
         clear = jnp.minimum(clear, jnp.min(jnp.where(member, sd_init, inf)))
         if step is not None:
             common = (init, opt, g.task_mask, g.cluster, g.orient_kind)
@@ -454,7 +517,8 @@ def _check(g: Geometry, spaces: shapes.Prepared, meta, lane: _Lane, p: Array, r:
                 goals.append(goal)
             # The region test is the same; the target's formula is not.
             goal = jnp.where(g.yaw_meta, goals[0], goals[1]) if formula == "both" else goals[0]
-            turned = jnp.where(inside, quat.rotate_towards(r, goal, n["max_angle"]), r)
+            half_turn = sincos(0.5 * n["max_angle"])
+            turned = jnp.where(inside, quat.turn_towards(r, goal, half_turn), r)
             r = jnp.where(done, r, turned)
             counted = inside & ~done
     return _Check(p, travelled, done, code, activated, r, counted, clear)
@@ -530,6 +594,19 @@ def _lanes(geometry: Geometry, params: Params, spaces: shapes.Prepared, which: s
     return _Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
                  _step_key(key), rollout_draws(key, dtype), own, g.aim_point[target],
                  path.c0, path.u, path.length)
+
+
+def _once(tree, token: Bool[Array, ""]):
+    """``tree`` as it is, computed once: ``token`` must be true at run time, unknown to
+    XLA, and not batched. XLA's CPU backend fuses a value into each fusion that reads
+    it, so a value read by several (a point's three components, the sdfs that decide
+    activation, clearance and the meta weights) is computed in each, and it removes
+    ``jax.lax.optimization_barrier`` before fusion. A conditional's results are
+    buffers, so the value is computed once, before the branch. Measured on 2 CPU cores,
+    50 scenes (benchmarks/RESULTS.md): the shacc mode's stepped pass 0.805 s to 0.665 s
+    with the sdfs computed once. Not for accelerators, where a conditional waits for
+    its predicate on the host."""
+    return jax.lax.cond(token, lambda t: t, lambda t: jax.tree.map(jnp.zeros_like, t), tree)
 
 
 def _first(mask: Array, size: int) -> tuple[Array, Array, Array]:
@@ -642,9 +719,13 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
         return (jax.tree.map(pick, per_lane), jax.tree.map(pick, spaces),
                 None if meta is None else jax.tree.map(pick, meta))
 
-    def check(ln, p, r, step=None):
+    def check(ln, p, r, step=None, sd=None):
         return _check(*scene_of(ln.scene), ln, p, r, track, formula, swept_checks,
-                      collision_checks, step, hulls)
+                      collision_checks, step, hulls, sd)
+
+    def once(tree, token):
+        # On a CPU, values read by several fusions are computed once (:func:`_once`).
+        return _once(tree, token) if backend == "cpu" else tree
 
     def begin(ids, occupied):
         """The lanes ``ids`` and their states before the first step (checked at the
@@ -677,10 +758,20 @@ def stepped_pass(geometry: Geometry, params: Params, which: str, track: bool,
                             result, done)
 
     def step(s: _State, lane: _Lane) -> _State:
-        m = lanes(_move)(lane, s)
+        # Steps are never negative: a condition true at run time that XLA cannot fold.
+        token = s.k[0] >= 0
+        m = lanes(_move)(lane, s, once(lanes(_aim)(lane, s), token))
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
-        full = lanes(lambda ln, st, mv: check(ln, jnp.stack(mv.p), st.r, (st, mv)))
+
+        def full(ln, st, mv):
+            def sdfs(ln, mv):
+                _, sp, mt = scene_of(ln.scene)
+                return _sdfs(sp, mt, jnp.stack(mv.p), track)
+            sd = once(lanes(sdfs)(ln, mv), token)
+            return lanes(lambda ln, st, mv, sd: check(ln, jnp.stack(mv.p), st.r, (st, mv), sd))(
+                ln, st, mv, sd)
+
         if F >= B:  # share 1, every lane checked: no gathering
             got = need
             c = full(lane, s, m)

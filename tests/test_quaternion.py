@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from geometry_precompute.bake import is_horizontal_approach
 from geometry_precompute.frames import frame_from_approach as cpu_frame
 from shacc_jax import quaternion as quat
+from shacc_jax import trig
 from shacc_jax.meta import yaw_directions
 from shacc_jax.orientation import fixed_direction, frame_from_approach, task_orientation
 from shacc_jax.shapes import prepare_all
@@ -103,6 +104,31 @@ def test_rotate_opposite_turns_about_ee_x():
     ra = Rotation.from_quat(np.r_[a[1:], a[:1]])
     rel = (ra.inv() * Rotation.from_quat(np.r_[out[1:], out[:1]])).as_rotvec()
     np.testing.assert_allclose(rel, [0.1, 0.0, 0.0], atol=1e-5)
+
+
+turn = jax.jit(lambda a, b, m: quat.turn_towards(a, b, trig.sincos(0.5 * m)))
+
+
+@given(st.integers(0, 10_000), st.floats(0.0, 3.0), st.sampled_from(["random", "same", "opposite"]))
+def test_turn_towards_is_rotate_towards(seed, step, case):
+    """The stepped users' form (no arccos, no per-step sine) gives the slerp's point,
+    also for equal and opposite orientations (the tie) and for no turn at all."""
+    rng = np.random.default_rng(seed)
+    a, b = wxyz(Rotation.random(2, rng=rng))
+    if case == "same":
+        b = a * rng.choice([-1.0, 1.0])
+    elif case == "opposite":  # 180 degrees apart: <a, b> = 0
+        b = wxyz(Rotation.from_quat(np.r_[a[1:], a[:1]]) * Rotation.from_rotvec([0, np.pi, 0]))
+    with jax.enable_x64(True):
+        args = (jnp.asarray(a), jnp.asarray(b), jnp.float64(step))
+        want = np.asarray(quat.rotate_towards(*args))
+        got = np.asarray(turn(*args))
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    # float32 against float32: at the tie, the rounding of <a, b> and of the relative
+    # axis picks the side in both forms alike.
+    args = (jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32), jnp.float32(step))
+    np.testing.assert_allclose(np.asarray(turn(*args)), np.asarray(quat.rotate_towards(*args)),
+                               atol=2e-6)
 
 
 @given(st.integers(0, 10_000))
