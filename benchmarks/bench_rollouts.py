@@ -287,28 +287,31 @@ def cmd_points(args) -> None:
 
 
 def _run_devices(args, modes) -> None:
-    """Wall time of ``shacc_jax.run`` planned over 1..K devices (one host thread per
-    device), results back on the host."""
+    """Wall time of ``shacc_jax.execute`` of a plan over 1..K devices (one host thread
+    per device), results back on the host; 0 devices: the plan's own default (on a CPU,
+    every CPU device for stepped users, ``runplan.plan``)."""
     import jax
 
     from shacc_jax.runplan import execute, plan
 
     for n in args.sizes:
-        baked = _load_bake(args.bake, n)
+        baked = _load_bake(args.bake, n, args.collision, args.user, args.population)
         S, T = baked.task_mask.shape
         rollouts = S * T * baked.starts.shape[1] * len(modes)
         for k in args.devices:
-            devs = jax.local_devices()[:k]
-            p = plan(baked, modes, devices=devs)
+            p = plan(baked, modes, devices=jax.local_devices()[:k] if k else None)
+            t = time.perf_counter()
             execute(p, baked)  # compile and warm up
+            first = time.perf_counter() - t
             times = []
             for _ in range(args.repeat):
                 t = time.perf_counter()
                 execute(p, baked)
                 times.append(time.perf_counter() - t)
             med = statistics.median(times)
-            print(json.dumps({"devices": list(p.devices), "scenes": S,
-                              "rollouts": rollouts, "wall_s_median": med,
+            print(json.dumps({"devices": list(p.devices), "scenes": S, "rollouts": rollouts,
+                              "user": args.user, "stepped": p.layout.stepped_users,
+                              "first_s": first, "wall_s_median": med, "wall_s_min": min(times),
                               "rollouts_per_s": rollouts / med}), flush=True)
 
 
@@ -355,7 +358,8 @@ def main() -> None:
     r.add_argument("--grid", type=int, nargs=2, metavar=("NY", "NZ"),
                    help="replace the baked 6 x 6 start grid")
     r.add_argument("--devices", type=int, nargs="+",
-                   help="time shacc_jax.run planned over these device counts")
+                   help="time shacc_jax.execute planned over these device counts (0: the "
+                   "plan's default)")
     r.add_argument("--collision", action="store_true",
                    help='collision = "on" for every scene (the bake holds the objects)')
     r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),

@@ -9,6 +9,10 @@ pin_cpu_codegen()  # before JAX starts its CPU backend: determinism.py says why
 
 # ruff: noqa: E402
 
+from .runplan import split_cpu
+
+split_cpu()  # several CPU devices, before JAX starts its CPU backend: runplan.cpu_devices
+
 from .evaluation import evaluate
 from .metrics import host_metrics
 from .montecarlo import clutteredness_mc

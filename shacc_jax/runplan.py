@@ -136,6 +136,39 @@ class Run(NamedTuple):
     search: Search | list[Search] | None
 
 
+def cpu_devices(cores: int | None = None) -> int:
+    """How many XLA CPU devices a process starts with (:func:`split_cpu`): half the
+    cores the process may use, at least two, at most the cores. The stepped users' loop
+    is a chain of small fusions that one device cannot spread over many cores, while
+    devices run their shares of the scenes side by side (measured, benchmarks/RESULTS.md:
+    on 2 cores, 108 000 rollouts, 1 device 9.2e4 rollouts/s, 2 devices 1.17e5; on 16
+    cores, 432 000 rollouts, 1, 2, 4, 8, 16 devices 4.0e4, 7.8e4, 1.44e5, 2.44e5,
+    2.10e5).
+
+    >>> cpu_devices(1), cpu_devices(2), cpu_devices(4), cpu_devices(16)
+    (1, 2, 2, 8)
+    """
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else os.cpu_count() or 1
+    return max(1, min(cores, max(2, cores // 2)))
+
+
+def split_cpu() -> int:
+    """Start JAX's CPU backend with :func:`cpu_devices` devices, unless the user chose
+    a number (``JAX_NUM_CPU_DEVICES``, or ``jax_num_cpu_devices`` in ``jax.config``) or
+    the backend has started already (then it keeps what it has). Importing
+    ``shacc_jax`` calls it. Returns the number set, or 0 where none was."""
+    if jax.config.jax_num_cpu_devices != -1:  # type: ignore[attr-defined]  # -1: one device
+        return 0
+    n = cpu_devices()
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # JAX's backends are up: too late to add devices
+        return 0
+    return n
+
+
 def _parse_bytes(text: str) -> int:
     units = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
     t = text.strip().upper().removesuffix("B")
@@ -223,8 +256,8 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     :param fields: the Rollouts fields to copy back (default all).
     :param metrics: compute the per-scene metrics (else left None).
     :param budget_bytes: the memory budget (default :func:`budget`).
-    :param devices: where to split the scenes (default every local accelerator, or the
-        first CPU device).
+    :param devices: where to split the scenes (default every local accelerator; on a
+        CPU the first device, or every one for stepped users).
     :param backend: the backend whose block size and memory model apply (default the
         one in use).
     :raises InputError: when two start poses of the batch do not fit the budget.
@@ -235,13 +268,6 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         p.pieces, p.layout.lanes_per_block
     """
     backend = backend or jax.default_backend()
-    if devices is None:
-        # An accelerator's devices each add their own compute; a CPU's devices
-        # (jax_num_cpu_devices) share the host's cores and would only compile the
-        # program once more each, so a CPU run uses one unless asked for more.
-        local = jax.local_devices()
-        devices = local[:1] if backend == "cpu" else local
-    devices = list(devices)
     limit = budget() if budget_bytes is None else int(budget_bytes)
     S, N, T = baked.task_mask.shape[0], baked.starts.shape[1], baked.task_mask.shape[1]
     modes = tuple(modes)
@@ -257,6 +283,14 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     layout = replace(layout, lanes_per_block=layout.lanes_per_block
                      or lanes_per_block_default(backend, layout.collision_checks,
                                                 layout.stepped_users))
+    if devices is None:
+        # An accelerator's devices each add their own compute. A CPU's devices
+        # (jax_num_cpu_devices, split_cpu) share its cores: the closed form keeps them
+        # busy from one device, and more would only compile the program once more
+        # each; the stepped users' loop does not, and runs on all of them.
+        local = jax.local_devices()
+        devices = local[:1] if backend == "cpu" and not layout.stepped_users else local
+    devices = list(devices)
     per_start = (bytes_per_rollout(layout.collision_checks, backend)
                  * S * T * len(modes) * (P or 1))
     # At least two starts in every program, even a one-start grid (padded by repeating

@@ -346,6 +346,10 @@ def test_evaluation_spread_over_two_cpu_devices(shipped_bake):
 
     assert len(jax.local_devices()) == 2
     assert len(shacc_jax.plan(shipped_bake).devices) == 1  # a CPU's devices share its cores
+    # Stepped users leave cores idle from one device: their plan takes every CPU device.
+    noisy = replace(shipped_bake, user_noise=np.full_like(shipped_bake.user_noise, 0.1))
+    stepped = shacc_jax.plan(noisy)
+    assert stepped.layout.stepped_users and len(stepped.devices) == 2
     two = shacc_jax.plan(shipped_bake, devices=jax.local_devices())
     assert len(two.devices) == 2 and two.padded_scenes == 12
     both = shacc_jax.execute(two, shipped_bake)
