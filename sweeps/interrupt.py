@@ -81,7 +81,10 @@ def start_resource_tracker() -> None:
 
 def _wait() -> None:
     signal.sigwait({signal.SIGINT})
-    end(130, "interrupted")
+    try:
+        end(130, "interrupted")
+    finally:  # `end` does not return; should it ever raise, the process still ends
+        os._exit(130)
 
 
 def end(status: int, line: str) -> None:
@@ -89,11 +92,16 @@ def end(status: int, line: str) -> None:
     does (module docstring)."""
     # Only a process that imported `fileio` can be writing (importing it here could
     # wait on the main thread's import lock): the interrupt lands within milliseconds
-    # of start-up, before the command line is imported.
+    # of start-up, before the command line is imported. The module may be in
+    # sys.modules half imported (the main thread is running its first lines): without
+    # its lock or its list of pending files, nothing has been written through it yet.
     fileio = sys.modules.get("geometry_precompute.fileio")
-    if fileio is not None:
-        fileio.COMMIT.acquire()  # held until the process ends: no rename, no write after
-        fileio.abandon_pending()
+    commit = getattr(fileio, "COMMIT", None)
+    if commit is not None:
+        commit.acquire()  # held until the process ends: no rename, no write after
+        abandon = getattr(fileio, "abandon_pending", None)
+        if abandon is not None:
+            abandon()
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

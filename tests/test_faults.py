@@ -154,6 +154,32 @@ def test_ctrl_c_while_the_command_line_is_imported():
     assert res.stderr.splitlines() == ["interrupted"], res.stderr
 
 
+def test_ctrl_c_while_the_file_writer_is_half_imported():
+    """A Ctrl-C that lands while the module that writes files is being imported finds
+    it in sys.modules without its lock (in CI: an exception in the Ctrl-C thread, and
+    the command ran on to exit 0 and wrote its output). Here the import is paused in
+    its first lines when the signal is sent, so the moment is certain."""
+    program = (
+        "import os, signal, sys, time\n"
+        "class Finder:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'geometry_precompute.errors' and \\\n"
+        "                'geometry_precompute.fileio' in sys.modules:\n"
+        "            os.kill(os.getpid(), signal.SIGINT)\n"
+        "            time.sleep(5)\n"
+        "        return None\n"
+        "from sweeps import interrupt\n"
+        "interrupt.install()\n"
+        "sys.meta_path.insert(0, Finder())\n"
+        "import geometry_precompute.fileio\n"
+        "print('imported')\n")
+    res = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 130, res.stderr
+    assert res.stderr.splitlines() == ["interrupted"], res.stderr
+    assert res.stdout == ""
+
+
 @pytest.mark.parametrize("name,moment", [(n, t) for n, (_, ts) in CTRL_C.items() for t in ts])
 def test_ctrl_c_at_any_moment(tmp_path, name, moment):
     """Exactly `interrupted`, status 130, no crash, no output, no process left."""
