@@ -287,9 +287,10 @@ def cmd_points(args) -> None:
 
 
 def _run_devices(args, modes) -> None:
-    """Wall time of ``shacc_jax.execute`` of a plan over 1..K devices (one host thread
-    per device), results back on the host; 0 devices: the plan's own default (on a CPU,
-    every CPU device for stepped users, ``runplan.plan``)."""
+    """Wall time of ``shacc_jax.execute`` of a plan over 1..K devices (an accelerator's
+    devices one host thread each, CPU devices one program), results back on the host;
+    0 devices: the plan's own default (on a CPU, every CPU device for stepped users,
+    ``runplan.plan``)."""
     import jax
 
     from shacc_jax.runplan import execute, plan

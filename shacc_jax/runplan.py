@@ -11,9 +11,10 @@ sweep's evaluation worker, Python) goes through :func:`run`:
    the fields copied back. It is a pure function of the bake's shapes and its
    arguments; ``shacc evaluate --plan`` prints it.
 2. :func:`execute` runs the plan: each piece of starts, each device's share of the
-   scenes from its own host thread, through the exported program cache; the pieces
-   and parts are joined once, and the per-scene metrics computed once, in double
-   precision, over the joined rollouts (``host_metrics``).
+   scenes (an accelerator's from its own host thread; several CPU devices as one
+   program over a mesh of them, compiled once), through the exported program cache;
+   the pieces and parts are joined once, and the per-scene metrics computed once, in
+   double precision, over the joined rollouts (``host_metrics``).
 
 Each rollout depends only on its own scene, start and task, so neither the pieces nor
 the device split change an answer: every part holds at least two scenes and every piece
@@ -32,11 +33,13 @@ import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from functools import partial
 from types import SimpleNamespace
 from typing import Any, NamedTuple
 
 import jax
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from geometry_precompute.errors import InputError
 from geometry_precompute.schema import (
@@ -78,7 +81,8 @@ class RunPlan:
     ``n_points``: P sweep points over one geometry (None: Params of shape (S,)). ``pieces``:
     the first start of each piece of the start grid, ``starts_per_piece`` starts each (the
     last piece padded by repeating the grid's last start, so every piece has one shape and
-    one program). ``devices``: where the scene parts run, one host thread each;
+    one program). ``devices``: where the scene parts run (one host thread per accelerator; CPU
+    devices as one program);
     ``scenes_per_part`` scenes each, the scenes padded by repeating the last one to
     ``padded_scenes``. ``fields``: the Rollouts fields copied to the host (the others stay
     None). ``metrics``: whether :func:`execute` computes the per-scene metrics.
@@ -286,8 +290,7 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     if devices is None:
         # An accelerator's devices each add their own compute. A CPU's devices
         # (jax_num_cpu_devices, split_cpu) share its cores: the closed form keeps them
-        # busy from one device, and more would only compile the program once more
-        # each; the stepped users' loop does not, and runs on all of them.
+        # busy from one device; the stepped users' loop does not, and runs on all.
         local = jax.local_devices()
         devices = local[:1] if backend == "cpu" and not layout.stepped_users else local
     devices = list(devices)
@@ -341,6 +344,39 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
     return Rollouts._make(host.get(k) for k in Rollouts._fields)
 
 
+@partial(jax.jit, static_argnames=("layout", "fields", "mesh", "lead"))
+def _evaluate_parts(geometry: Geometry, params: Params, layout: Layout,
+                    fields: tuple[str, ...], mesh: Mesh, lead: int) -> tuple:
+    """The fields of :func:`evaluate` over a one-axis mesh of CPU devices, each device
+    evaluating its part of the scenes as it would alone (``shard_map``: no value crosses
+    between the parts)."""
+    def part(g: Geometry, p: Params) -> tuple:
+        rollouts = evaluate(g, p, layout).rollouts
+        return tuple(getattr(rollouts, k) for k in fields)
+
+    scenes = PartitionSpec(*[None] * lead, "scenes")
+    # No collective inside, so JAX's check of which values vary across the devices has
+    # nothing to guard (and the kernel's conditionals mix both kinds).
+    return jax.shard_map(part, mesh=mesh, in_specs=(PartitionSpec("scenes"), scenes),
+                         out_specs=scenes, check_vma=False)(geometry, params)
+
+
+def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: Layout,
+                    fields: tuple[str, ...], lead: int) -> Rollouts:
+    """Every part on its CPU device, as one program (compiled once, not once per
+    device: XLA's CPU client runs each device's part on its own thread); the fields
+    copied back."""
+    mesh = Mesh(np.array(devices), ("scenes",))
+    geometry = jax.device_put(geometry, NamedSharding(mesh, PartitionSpec("scenes")))
+    params = jax.device_put(params, NamedSharding(
+        mesh, PartitionSpec(*[None] * lead, "scenes")))
+    out = program_cache.call("evaluate-parts", _evaluate_parts,
+                             {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
+                             (geometry, params), tuple(fields))
+    host = dict(zip(fields, jax.tree.map(np.asarray, jax.device_get(out)), strict=True))
+    return Rollouts._make(host.get(k) for k in Rollouts._fields)
+
+
 def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
     """Run a :func:`plan` against the bake (and the points) it was made for; NumPy
     results, joined once, metrics once.
@@ -364,6 +400,7 @@ def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
         params = jax.tree.map(lambda a: _pad(a, p.padded_scenes, lead), params)
     local = {str(d): d for d in jax.local_devices()}
     devices = [local[name] for name in p.devices]
+    on_cpu = all(d.platform == "cpu" for d in devices)
 
     def part(k: int, piece: Geometry) -> tuple[Geometry, Params]:
         if len(devices) == 1:
@@ -389,6 +426,8 @@ def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
                 starts=geometry.starts[:, idx], start_index=geometry.start_index[:, idx])
             if len(devices) == 1:
                 outs = [_on_device(devices[0], *part(0, piece), p.layout, p.fields)]
+            elif on_cpu:
+                outs = [_on_cpu_devices(devices, piece, params, p.layout, p.fields, lead)]
             else:
                 outs = list(pool.map(lambda k, piece=piece: _on_device(
                     devices[k], *part(k, piece), p.layout, p.fields), range(len(devices))))
