@@ -1,6 +1,7 @@
 """Memory one rollout needs during evaluation, for the memory model of ``shacc_jax/runplan.py``.
 
     python benchmarks/bench_memory.py --bake bake.npz --scenes 1000 [--collision]
+        [--user NOISE LAG TREMOR]
 
 (the bake from ``bench_rollouts.py bake``). Prints XLA's memory analysis of the
 compiled program (temporaries, outputs, arguments) and, where the device reports it,
@@ -24,8 +25,10 @@ def main() -> None:
     ap.add_argument("--bake", required=True)
     ap.add_argument("--scenes", type=int, default=1000)
     ap.add_argument("--collision", action="store_true")
+    ap.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
+                    help="an imperfect simulated user in every scene (the stepped program)")
     args = ap.parse_args()
-    geometry, params, layout = _load(args.bake, args.scenes, args.collision)
+    geometry, params, layout = _load(args.bake, args.scenes, args.collision, user=args.user)
     f = jax.jit(shacc_jax.evaluate, static_argnames="layout")
     m = f.lower(geometry, params, layout).compile().memory_analysis()
     S, N = geometry.starts.shape[:2]
@@ -35,7 +38,8 @@ def main() -> None:
     stats = jax.devices()[0].memory_stats() or {}
     peak = stats.get("peak_bytes_in_use")
     print(json.dumps({"device": str(jax.devices()[0]), "scenes": S, "rollouts": rollouts,
-                      "collision": args.collision,
+                      "collision": args.collision, "user": args.user,
+                      "stepped": layout.stepped_users,
                       "analysis_bytes_per_rollout": round(analysis / rollouts, 1),
                       "peak_bytes_per_rollout":
                       None if peak is None else round(peak / rollouts, 1)}))

@@ -63,9 +63,14 @@ from .types import Evaluation, Geometry, Params, Rollouts, SceneMetrics, Search
 # device memory on an H100 (10 000 and 1 000 random 10-task scenes) 251-393 bytes
 # without checks and 2 194-3 051 with; XLA's memory analysis of the CPU program (100
 # and 1 000 scenes) 1 004-1 089 and 3 554-5 420 (benchmarks/RESULTS.md, memory per
-# rollout).
-BYTES_PER_ROLLOUT = {("accelerator", False): 600, ("accelerator", True): 3700,
-                     ("cpu", False): 1300, ("cpu", True): 6500}
+# rollout). Stepped users' program (the third key) holds only its queue's slots beside
+# the outputs: on a CPU 172-254 bytes without checks and 190-482 with (1 000 and 100
+# scenes, about 160 a rollout plus 10-35 MB of slots); on accelerators not measured
+# apart, so the closed form's figures.
+BYTES_PER_ROLLOUT = {("accelerator", False, False): 600, ("accelerator", True, False): 3700,
+                     ("cpu", False, False): 1300, ("cpu", True, False): 6500,
+                     ("accelerator", False, True): 600, ("accelerator", True, True): 3700,
+                     ("cpu", False, True): 400, ("cpu", True, True): 700}
 ENV = "SHACC_MEMORY_BUDGET"
 MAX_BUDGET = 2**60  # bytes: an exbibyte, beyond any machine
 _GEOMETRY_FIELDS = tuple(f.name for f in GEOMETRY)
@@ -211,11 +216,14 @@ def budget() -> int:
     return int(0.5 * free)
 
 
-def bytes_per_rollout(collision: bool, backend: str | None = None) -> int:
+def bytes_per_rollout(collision: bool, backend: str | None = None,
+                      stepped: bool = False) -> int:
     """:data:`BYTES_PER_ROLLOUT` of the program that runs on ``backend`` ("cpu" or an
-    accelerator's; default the one in use), with or without collision checks."""
+    accelerator's; default the one in use), with or without collision checks, closed
+    form or ``stepped`` (imperfect users)."""
     backend = backend or jax.default_backend()
-    return BYTES_PER_ROLLOUT[("cpu" if backend == "cpu" else "accelerator", bool(collision))]
+    return BYTES_PER_ROLLOUT[("cpu" if backend == "cpu" else "accelerator", bool(collision),
+                              bool(stepped))]
 
 
 def _size(n: float) -> str:
@@ -294,7 +302,7 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         local = jax.local_devices()
         devices = local[:1] if backend == "cpu" and not layout.stepped_users else local
     devices = list(devices)
-    per_start = (bytes_per_rollout(layout.collision_checks, backend)
+    per_start = (bytes_per_rollout(layout.collision_checks, backend, layout.stepped_users)
                  * S * T * len(modes) * (P or 1))
     # At least two starts in every program, even a one-start grid (padded by repeating
     # it): where an axis has length one, XLA simplifies the arithmetic around it

@@ -225,6 +225,27 @@ def test_collision_checks_are_budgeted_as_they_need(shipped_results):
     np.testing.assert_array_equal(whole.rollouts.step, pieces.rollouts.step)
 
 
+def test_stepped_users_are_budgeted_as_they_need(shipped_results):
+    """Stepped users hold only their queue's slots beside the outputs (measured:
+    benchmarks/RESULTS.md), so on a CPU a budget that splits the closed form's batch
+    holds the same batch with a noisy user in one piece; collision checks still cost
+    more."""
+    from geometry_precompute import bake
+
+    plain = bake(shipped_results[8:9])
+    noisy = replace(plain, user_noise=np.full_like(plain.user_noise, 0.2))
+    modes = ("baseline",)
+    per_start = plain.n_tasks * len(modes)
+    assert bytes_per_rollout(False, "cpu", stepped=True) < bytes_per_rollout(False, "cpu")
+    assert bytes_per_rollout(True, "cpu", stepped=True) > bytes_per_rollout(False, "cpu",
+                                                                            stepped=True)
+    limit = bytes_per_rollout(False, "cpu", stepped=True) * per_start * plain.n_starts
+    stepped = plan(noisy, modes, budget_bytes=limit, backend="cpu")
+    assert stepped.layout.stepped_users and stepped.pieces == (0,)
+    closed = plan(plain, modes, budget_bytes=limit, backend="cpu")
+    assert not closed.layout.stepped_users and len(closed.pieces) > 1
+
+
 def test_evaluate_plan_prints_the_plan_and_evaluates_nothing(monkeypatch, capsys):
     """``shacc evaluate --plan``: the RunPlan for the batch, with the pieces the budget
     allows; no evaluation runs."""

@@ -283,7 +283,8 @@ def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
     alone = shacc_jax.run(_bake(scenes[1:2], overrides), shacc_jax.MODES).evaluation
     batch = _bake([*scenes, *scenes[:3]], overrides)  # seven scenes
     devices = jax.devices("cpu")[:2]
-    per_start = runplan.bytes_per_rollout(False) * batch.n_scenes * batch.n_tasks * 3
+    per_start = (runplan.bytes_per_rollout(False, stepped=True)
+                 * batch.n_scenes * batch.n_tasks * 3)
     plan = shacc_jax.plan(batch, shacc_jax.MODES, budget_bytes=4 * per_start, devices=devices)
     assert len(plan.pieces) > 1 and len(plan.devices) == 2
     inside = shacc_jax.execute(plan, batch)
