@@ -109,6 +109,16 @@ def angle(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, ""]:
     return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(dot(a, b))))
 
 
+def _geodesic_sign(q: Float[Array, "4"], d: Float[Array, ""],
+                   v: Float[Array, "3"]) -> Float[Array, ""]:
+    """The sign that makes ``target`` the near one of its two quaternions, given
+    d = <q, target> and v the relative rotation's vector part; at d = 0 the tie rule of
+    :func:`rotate_towards`."""
+    tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
+                         jnp.where(v[1] != 0, jnp.sign(v[1]), jnp.where(v[2] < 0, -1.0, 1.0)))
+    return jnp.where(jnp.abs(d) > 8 * _eps(q), jnp.sign(d), tie_sign)
+
+
 def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
                    max_angle: Float[Array, ""]) -> Float[Array, "4"]:
     """Rotate ``q`` towards ``target`` along the geodesic by at most ``max_angle``
@@ -120,11 +130,7 @@ def rotate_towards(q: Float[Array, "4"], target: Float[Array, "4"],
     then z where v . x = 0): our reading of the Automaton's rule.
     """
     d = dot(q, target)
-    rel = multiply(conjugate(q), target)
-    v = rel[1:]
-    tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
-                         jnp.where(v[1] != 0, jnp.sign(v[1]), jnp.where(v[2] < 0, -1.0, 1.0)))
-    sign = jnp.where(jnp.abs(d) > 8 * _eps(q), jnp.sign(d), tie_sign)
+    sign = _geodesic_sign(q, d, multiply(conjugate(q), target)[1:])
     t = target * sign
     cos_half = jnp.minimum(1.0, jnp.abs(d))
     half = jnp.arccos(cos_half)  # half the rotation angle
@@ -153,9 +159,7 @@ def turn_towards(q: Float[Array, "4"], target: Float[Array, "4"],
     sin_m, cos_m = half_turn
     d = dot(q, target)
     v = multiply(conjugate(q), target)[1:]
-    tie_sign = jnp.where(v[0] != 0, jnp.sign(v[0]),
-                         jnp.where(v[1] != 0, jnp.sign(v[1]), jnp.where(v[2] < 0, -1.0, 1.0)))
-    sign = jnp.where(jnp.abs(d) > 8 * _eps(q), jnp.sign(d), tie_sign)
+    sign = _geodesic_sign(q, d, v)
     n = jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     scale = sign * sin_m / jnp.where(n > 0, n, 1.0)
     stepped = normalize(multiply(q, jnp.stack([cos_m, scale * v[0], scale * v[1],
