@@ -132,24 +132,31 @@ CTRL_C = {
 }
 
 
-def test_ctrl_c_while_the_command_line_is_imported():
-    """The console script handles Ctrl-C before it imports the command line: a fresh
-    install compiles every module on its first import, long enough for a Ctrl-C to land
-    there (it did, in CI: a KeyboardInterrupt traceback). Here the import itself sends
-    the signal, so the moment is certain."""
+def ctrl_c_during_import(when: str, then: str) -> subprocess.CompletedProcess:
+    """Run the Python lines ``then`` in a fresh interpreter whose import system sends it
+    SIGINT, and pauses, the first time a module is looked up while the expression
+    ``when`` (of ``name``, the module looked up) is true: the moment is certain."""
     program = (
-        "import os, signal, sys, time, types\n"
+        "import os, signal, sys, time\n"
         "class Finder:\n"
         "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'sweeps.cli':\n"
+        f"        if {when}:\n"
         "            os.kill(os.getpid(), signal.SIGINT)\n"
         "            time.sleep(5)\n"
         "        return None\n"
-        "sys.meta_path.insert(0, Finder())\n"
-        "from sweeps.launch import entry\n"
-        "entry()\n")
-    res = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
-                         timeout=60)
+        f"{then}")
+    return subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_ctrl_c_while_the_command_line_is_imported():
+    """The console script handles Ctrl-C before it imports the command line: a fresh
+    install compiles every module on its first import, long enough for a Ctrl-C to land
+    there (it did, in CI: a KeyboardInterrupt traceback)."""
+    res = ctrl_c_during_import("name == 'sweeps.cli'",
+                               "sys.meta_path.insert(0, Finder())\n"
+                               "from sweeps.launch import entry\n"
+                               "entry()\n")
     assert res.returncode == 130, res.stderr
     assert res.stderr.splitlines() == ["interrupted"], res.stderr
 
@@ -158,23 +165,14 @@ def test_ctrl_c_while_the_file_writer_is_half_imported():
     """A Ctrl-C that lands while the module that writes files is being imported finds
     it in sys.modules without its lock (in CI: an exception in the Ctrl-C thread, and
     the command ran on to exit 0 and wrote its output). Here the import is paused in
-    its first lines when the signal is sent, so the moment is certain."""
-    program = (
-        "import os, signal, sys, time\n"
-        "class Finder:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'geometry_precompute.errors' and \\\n"
-        "                'geometry_precompute.fileio' in sys.modules:\n"
-        "            os.kill(os.getpid(), signal.SIGINT)\n"
-        "            time.sleep(5)\n"
-        "        return None\n"
-        "from sweeps import interrupt\n"
-        "interrupt.install()\n"
-        "sys.meta_path.insert(0, Finder())\n"
-        "import geometry_precompute.fileio\n"
-        "print('imported')\n")
-    res = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
-                         timeout=60)
+    its first lines."""
+    res = ctrl_c_during_import("name == 'geometry_precompute.errors' and "
+                               "'geometry_precompute.fileio' in sys.modules",
+                               "from sweeps import interrupt\n"
+                               "interrupt.install()\n"
+                               "sys.meta_path.insert(0, Finder())\n"
+                               "import geometry_precompute.fileio\n"
+                               "print('imported')\n")
     assert res.returncode == 130, res.stderr
     assert res.stderr.splitlines() == ["interrupted"], res.stderr
     assert res.stdout == ""
