@@ -347,7 +347,12 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
     geometry, params = jax.device_put((geometry, params), device)
     ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
                             _EVALUATION_STRUCTURE)
-    wanted = {k: getattr(ev.rollouts, k) for k in fields}
+    return _copied_back({k: getattr(ev.rollouts, k) for k in fields})
+
+
+def _copied_back(wanted: dict) -> Rollouts:
+    """The Rollouts fields ``wanted`` (name -> device array) on the host, every copy
+    started before the first is waited for; the other fields None."""
     host = jax.tree.map(np.asarray, jax.device_get(wanted))
     return Rollouts._make(host.get(k) for k in Rollouts._fields)
 
@@ -381,8 +386,7 @@ def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: L
     out = program_cache.call("evaluate-parts", _evaluate_parts,
                              {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
                              (geometry, params), tuple(fields))
-    host = dict(zip(fields, jax.tree.map(np.asarray, jax.device_get(out)), strict=True))
-    return Rollouts._make(host.get(k) for k in Rollouts._fields)
+    return _copied_back(dict(zip(fields, out, strict=True)))
 
 
 def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
