@@ -68,4 +68,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from shacc_jax import configure_runtime
+
+    configure_runtime()  # as the commands do, before anything starts JAX
     main()

@@ -116,4 +116,7 @@ def _report(seen: dict, end: float) -> None:
 
 
 if __name__ == "__main__":
+    from shacc_jax import configure_runtime
+
+    configure_runtime()  # as the commands do, before anything starts JAX
     main()

@@ -58,7 +58,7 @@ def inverse_square_weights(sd_opt: Array, in_cluster: Array) -> Array:
 
 def normalised(w: Array) -> Array:
     """Weights over axis 0 (tasks) scaled to sum to one."""
-    return w / jnp.maximum(jnp.sum(w, axis=0, keepdims=True), jnp.finfo(w.dtype).tiny)
+    return w / jnp.maximum(quat.ordered_sum(w, 0)[None], jnp.finfo(w.dtype).tiny)
 
 
 def _region_and_weights(init, opt, mask, cluster, p, tau, sd=None) -> tuple[Array, Array]:
@@ -113,7 +113,7 @@ def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Arr
     # The weights' normalisation does not change the direction of the sum.
     inside, w = _region_and_weights(init, opt, mask, cluster, p, tau, sd)
     ux, uy = task_direction(orient_kind, fixed_dir, axis, p)
-    ax, ay = jnp.sum(w * ux, axis=0), jnp.sum(w * uy, axis=0)
+    ax, ay = quat.ordered_sum(w * ux, 0), quat.ordered_sum(w * uy, 0)
     n = jnp.sqrt(ax * ax + ay * ay)
     ok = n > jnp.finfo(n.dtype).tiny
     inv = 1.0 / jnp.where(ok, n, 1.0)

@@ -86,5 +86,5 @@ def _toward_axis(axis: Float[Array, "2"], p: Float[Array, "3"]) -> tuple[Array, 
     dx, dy = axis[0] - p[0], axis[1] - p[1]
     r2 = dx * dx + dy * dy
     on_axis = r2 <= ON_AXIS**2
-    inv = 1.0 / jnp.sqrt(jnp.where(on_axis, 1.0, r2))
+    inv = quat.reciprocal_sqrt(jnp.where(on_axis, 1.0, r2))
     return dx * inv, dy * inv, on_axis

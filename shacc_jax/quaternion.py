@@ -50,6 +50,27 @@ def norm(v: Array, axis: int = 0) -> Array:
     return jnp.sqrt(ordered_sum(v * v, axis))
 
 
+def sqrt_divisor(x: Array) -> Array:
+    """sqrt(x), to divide by: every ``a / sqrt(b)`` of the kernels is ``a /
+    sqrt_divisor(b)``, which rounds the same on every processor (an IEEE square root,
+    then an IEEE division).
+
+    XLA rewrites ``a / sqrt(b)`` into ``a * rsqrt(b)``, and its CPU backend computes
+    ``rsqrt`` from the processor's approximate reciprocal square root (``rsqrtps``)
+    refined by Newton steps. That approximation is not specified to the bit: Intel and
+    AMD processors differ in its last bits, and so did a side grasp's orientation, and
+    delta_R (through the arccos of a dot product near 1) by up to 1e-3 rad. The
+    ``maximum`` with the smallest normal number, which changes no x >= that number,
+    keeps the divisor from being a square root that XLA can match
+    (tests/test_determinism.py checks the programs for it)."""
+    return jnp.maximum(jnp.sqrt(x), jnp.finfo(jnp.result_type(x)).tiny)
+
+
+def reciprocal_sqrt(x: Array) -> Array:
+    """1 / sqrt(x) for x > 0, the same on every processor (:func:`sqrt_divisor`)."""
+    return 1.0 / sqrt_divisor(x)
+
+
 def multiply(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, "4"]:
     aw, ax, ay, az = a
     bw, bx, by, bz = b
@@ -105,8 +126,15 @@ def from_matrix(m: Float[Array, "3 3"]) -> Float[Array, "4"]:
 
 
 def angle(a: Float[Array, "4"], b: Float[Array, "4"]) -> Float[Array, ""]:
-    """the conventions (reference/conventions): 2 arccos(min(1, |<a, b>|))."""
-    return 2.0 * jnp.arccos(jnp.minimum(1.0, jnp.abs(dot(a, b))))
+    """The angle between two orientations (reference/conventions),
+    2 arccos(min(1, |<a, b>|)), computed as 2 atan2(|v|, |w|) of their relative
+    rotation a^-1 b = (w, v), w = <a, b>: the same angle, accurate to float32's
+    resolution everywhere. The arccos of a dot product near 1 loses half the digits
+    (one rounding of <a, b> near 1 is 3.5e-4 rad of angle), so delta_R near zero
+    differed by up to 1e-3 rad for differences in the last bit of an orientation."""
+    r = multiply(conjugate(a), b)
+    v = jnp.sqrt(r[1] * r[1] + r[2] * r[2] + r[3] * r[3])
+    return 2.0 * jnp.arctan2(v, jnp.abs(r[0]))
 
 
 def _geodesic_sign(q: Float[Array, "4"], d: Float[Array, ""],

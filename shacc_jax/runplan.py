@@ -55,6 +55,7 @@ from geometry_precompute.schema import (
 from . import program_cache
 from .evaluation import evaluate
 from .metrics import host_metrics
+from .runtime import configure_runtime
 from .types import Evaluation, Geometry, Params, Rollouts, SceneMetrics, Search
 
 # Memory one rollout needs during evaluation (rollout outputs, the activation pass, the
@@ -143,39 +144,6 @@ class Run(NamedTuple):
 
     evaluation: Evaluation
     search: Search | list[Search] | None
-
-
-def cpu_devices(cores: int | None = None) -> int:
-    """How many XLA CPU devices a process starts with (:func:`split_cpu`): half the
-    cores the process may use, at least two, at most the cores. The stepped users' loop
-    is a chain of small fusions that one device cannot spread over many cores, while
-    devices run their shares of the scenes side by side (measured, benchmarks/RESULTS.md:
-    on 2 cores, 108 000 rollouts, 1 device 9.2e4 rollouts/s, 2 devices 1.17e5; on 16
-    cores, 432 000 rollouts, 1, 2, 4, 8, 16 devices 4.0e4, 7.8e4, 1.44e5, 2.44e5,
-    2.10e5).
-
-    >>> cpu_devices(1), cpu_devices(2), cpu_devices(4), cpu_devices(16)
-    (1, 2, 2, 8)
-    """
-    if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
-            else os.cpu_count() or 1
-    return max(1, min(cores, max(2, cores // 2)))
-
-
-def split_cpu() -> int:
-    """Start JAX's CPU backend with :func:`cpu_devices` devices, unless the user chose
-    a number (``JAX_NUM_CPU_DEVICES``, or ``jax_num_cpu_devices`` in ``jax.config``) or
-    the backend has started already (then it keeps what it has). Importing
-    ``shacc_jax`` calls it. Returns the number set, or 0 where none was."""
-    if jax.config.jax_num_cpu_devices != -1:  # type: ignore[attr-defined]  # -1: one device
-        return 0
-    n = cpu_devices()
-    try:
-        jax.config.update("jax_num_cpu_devices", n)
-    except RuntimeError:  # JAX's backends are up: too late to add devices
-        return 0
-    return n
 
 
 def _parse_bytes(text: str) -> int:
@@ -279,6 +247,7 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         p = shacc_jax.plan(bake(results), budget_bytes=2**30, devices=["cpu:0"])
         p.pieces, p.layout.lanes_per_block
     """
+    configure_runtime()  # before JAX starts, where nothing has started it yet
     backend = backend or jax.default_backend()
     limit = budget() if budget_bytes is None else int(budget_bytes)
     S, N, T = baked.task_mask.shape[0], baked.starts.shape[1], baked.task_mask.shape[1]

@@ -240,7 +240,7 @@ def _turn_across(ux, uy, uz, angle_sc, axis_sc) -> tuple[Array, Array, Array]:
     e1x = jnp.where(big, 0.0, 1.0) - hu * ux
     e1y = jnp.where(big, 1.0, 0.0) - hu * uy
     e1z = -hu * uz
-    n = jnp.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    n = quat.sqrt_divisor(e1x * e1x + e1y * e1y + e1z * e1z)  # >= 0.43 here
     e1x, e1y, e1z = e1x / n, e1y / n, e1z / n
     e2x, e2y, e2z = uy * e1z - uz * e1y, uz * e1x - ux * e1z, ux * e1y - uy * e1x
     # a x u = cos(psi) (e1 x u) + sin(psi) (e2 x u) = -cos(psi) e2 + sin(psi) e1

@@ -300,6 +300,9 @@ def _run(argv: list[str]) -> int:
     # The sweep's evaluation workers turn the cache on for themselves; its client
     # process never loads JAX.
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
+        from shacc_jax import configure_runtime
+
+        configure_runtime()  # before anything starts JAX (shacc_jax/runtime.py)
         compile_cache.enable()
     module, name = args.func.split(":")
     func = getattr(importlib.import_module(f"{__package__}.{module}"), name)

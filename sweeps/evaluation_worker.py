@@ -72,6 +72,9 @@ def _setup() -> None:
     with _LOCK:
         if _READY:
             return
+        from shacc_jax import configure_runtime
+
+        configure_runtime()  # before this worker starts JAX (shacc_jax/runtime.py)
         from jax import monitoring
 
         from . import compile_cache

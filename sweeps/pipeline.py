@@ -62,7 +62,8 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
         ev.evaluation.metrics.u_scene[:, ev.modes.index("shacc")]   # (S,)
         scene_json(ev, 0)["modes"]["baseline"]["outcome"]          # per start and task
     """
-    compile_cache.enable()  # from Python too, not only from the command line
+    shacc_jax.configure_runtime()  # from Python too, not only from the command line
+    compile_cache.enable()
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()

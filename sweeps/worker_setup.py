@@ -2,13 +2,15 @@
 
 The local cluster (:func:`sweeps.cluster.connect`) hands every worker a
 :class:`WorkerSetup` when it creates it; distributed runs its ``setup`` in the new
-worker process, before the worker joins the scheduler. It does three things:
+worker process, before the worker joins the scheduler. It does four things:
 
 - SIGINT is ignored: Ctrl-C reaches the whole process group, and the command, not each
   worker, decides what it means (the cluster is closed, ``interrupted``);
 - a precompute worker runs at nice 5: with one per core, the precompute would otherwise
   take CPU time from the evaluation worker's compilation and from the host loop that
   drives the accelerator, which every chunk waits on;
+- an evaluation worker configures JAX's runtime (``shacc_jax.configure_runtime``)
+  before anything of it starts JAX;
 - an evaluation worker given a warm-up (the first chunk's job and one of its scenes)
   begins it at once, in a thread (:class:`sweeps.evaluation_worker.EarlyWarmUp`): JAX's
   start, the accelerator's and the program's load or compilation then overlap the
@@ -59,10 +61,16 @@ class WorkerSetup(WorkerPlugin):
         if PRECOMPUTE in resources:
             with contextlib.suppress(OSError):
                 os.nice(5)
-        elif EVALUATE in resources and self.warm_up is not None:
-            from .evaluation_worker import EarlyWarmUp
+        elif EVALUATE in resources:
+            # JAX's runtime before anything of this worker starts JAX (the pinned CPU
+            # code generation: shacc_jax/runtime.py).
+            from shacc_jax import configure_runtime
 
-            self.early = EarlyWarmUp(*self.warm_up).start()
+            configure_runtime()
+            if self.warm_up is not None:
+                from .evaluation_worker import EarlyWarmUp
+
+                self.early = EarlyWarmUp(*self.warm_up).start()
 
 
 def early_warm_up() -> EarlyWarmUp | None:

@@ -31,17 +31,23 @@ sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives besi
 # machine without accelerators.
 import jax  # noqa: E402
 
+jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_numpy_dtype_promotion", "strict")
+if os.environ.get("JAX_PLATFORMS", "cpu") == "cpu":
+    jax.config.update("jax_num_cpu_devices", 2)
+
+# The runtime the commands set up (the pinned CPU code generation), as an entry point
+# does: before anything starts JAX.
+from shacc_jax import configure_runtime  # noqa: E402
+
+configure_runtime()
+
 # Every process of the run shares compiled and traced programs through the run's cache
 # folder, as the commands do: a program the other worker (or a command) built is loaded,
 # not built again (the suite compiles far more than it runs: 960 -> 888 s on 2 cores).
 from sweeps import compile_cache  # noqa: E402
 
 compile_cache.enable()
-
-jax.config.update("jax_numpy_rank_promotion", "raise")
-jax.config.update("jax_numpy_dtype_promotion", "strict")
-if os.environ.get("JAX_PLATFORMS", "cpu") == "cpu":
-    jax.config.update("jax_num_cpu_devices", 2)
 
 
 def pytest_unconfigure(config):

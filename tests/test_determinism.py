@@ -135,3 +135,65 @@ def test_the_suite_runs_strict_on_two_devices():
     assert flags.jax_numpy_rank_promotion == "raise"
     assert flags.jax_numpy_dtype_promotion == "strict"
     assert len(jax.devices("cpu")) == 2
+
+
+def test_one_scene_in_pieces_of_two_starts_gives_the_same_bits():
+    """One scene of 6 tasks (a sweep's chunk of one), whole and in pieces of two starts:
+    the meta skill's sums over tasks were reductions whose order XLA's CPU backend chose
+    by the shape, and 3 of these scenes' shacc orientations differed in their last
+    bits (and delta_R by up to 1e-3 rad)."""
+    modes = ("baseline", "shacc")
+    scenes = [random_scene(11 + k, "uniform" if k % 2 == 0 else "gaussian", 3, 6, "paper")
+              for k in (7, 9, 11)]
+    results = [precompute(s, s.settings(DEFAULTS, {"start_grid": [4, 4], "v_max": 0.1}))
+               for s in scenes]
+    objects = max(len(s.objects) for s in scenes)
+    for r in results:
+        one = bake([r], 6, max_objects=objects)
+        per_start = bytes_per_rollout(False) * 6 * len(modes)
+        whole = run(one, modes, budget_bytes=10**12).evaluation.rollouts
+        pieces = run(one, modes, budget_bytes=2 * per_start).evaluation.rollouts
+        for name in whole._fields:
+            assert _same_bits(getattr(whole, name), getattr(pieces, name)), \
+                (r.scene.name, name)
+
+
+def test_sweep_tables_are_the_same_bits_with_and_without_the_compilation_cache(
+        tmp_path, monkeypatch):
+    """The program a sweep's evaluation worker runs does not depend on the cache: with
+    the cache off the worker once started JAX before the CPU code generation was
+    pinned (so its tables differed in 7 092 of 47 296 delta_R values). The pin is not
+    inherited from this process here, as it is not from a user's shell."""
+    cfg = parse_config(__import__("tomllib").loads(SWEEP), "cache.toml", tmp_path)
+    monkeypatch.setenv("XLA_FLAGS", "")
+    run_sweep(cfg, tmp_path / "cached", tmp_path / "cache", workers=1, progress=False)
+    monkeypatch.setenv("SHACC_COMPILE_CACHE", "off")
+    run_sweep(cfg, tmp_path / "plain", tmp_path / "cache", workers=1, progress=False)
+    assert _tables(tmp_path / "plain") == _tables(tmp_path / "cached")
+
+
+def test_no_division_by_a_square_root_in_the_programs():
+    """XLA rewrites ``a / sqrt(b)`` into ``a * rsqrt(b)``, which its CPU backend computes
+    from the processor's approximate instruction, so results differed between Intel and
+    AMD processors. No division in the evaluation's programs (closed form; stepped
+    users with collision checks) takes a square root as its divisor
+    (``quaternion.sqrt_divisor``). Checked on the lowered programs, which costs no
+    compilation."""
+    import re
+
+    import jax
+
+    from shacc_jax.runplan import plan
+    from shacc_jax.types import Geometry, Params
+
+    scenes = [random_scene(60 + i, ("uniform", "gaussian")[i % 2], 3, 5) for i in range(2)]
+    for over in ({}, {"user_noise": 0.1, "user_tremor": 0.01, "collision": "on"}):
+        b = bake([precompute(s, s.settings(DEFAULTS, {"start_grid": [2, 2], **over}))
+                  for s in scenes])
+        args = (Geometry.from_bake(b, np.float32), Params.from_bake(b, np.float32))
+        text = jax.jit(shacc_jax.evaluate, static_argnames="layout").lower(
+            *args, layout=plan(b, shacc_jax.MODES).layout).as_text()
+        roots = set(re.findall(r"(%\S+) = stablehlo\.sqrt ", text))
+        assert roots, over  # the pattern below reads this program's text
+        divisors = re.findall(r"stablehlo\.divide %\S+, (%\S+) ", text)
+        assert divisors and not roots.intersection(divisors), over

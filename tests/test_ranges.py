@@ -4,7 +4,6 @@ than memory split into pieces with the same results as one piece."""
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import replace
 
 import jax
@@ -264,23 +263,3 @@ def test_evaluate_plan_prints_the_plan_and_evaluates_nothing(monkeypatch, capsys
                  "optimized"]) == 0
     out = capsys.readouterr().out
     assert "6 piece(s) of 6 starts" in out and "optimized: the search first" in out
-
-
-def test_importing_shacc_jax_splits_the_cpu(tmp_path):
-    """A process that imports shacc_jax before JAX starts gets runplan.cpu_devices()
-    CPU devices; a number the user chose wins; where JAX has started, it keeps one."""
-    import subprocess
-    import sys
-
-    from shacc_jax.runplan import cpu_devices
-
-    def devices(code: str, **env) -> int:
-        environ = {k: v for k, v in os.environ.items() if k != "JAX_NUM_CPU_DEVICES"}
-        out = subprocess.run([sys.executable, "-c", code + "; print(len(jax.devices('cpu')))"],
-                             env={**environ, "JAX_PLATFORMS": "cpu", **env}, check=True,
-                             capture_output=True, text=True)
-        return int(out.stdout.split()[-1])
-
-    assert devices("import shacc_jax, jax") == cpu_devices()
-    assert devices("import shacc_jax, jax", JAX_NUM_CPU_DEVICES="3") == 3
-    assert devices("import jax; jax.devices(); import shacc_jax") == 1
