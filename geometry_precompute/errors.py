@@ -95,3 +95,19 @@ class SceneWarning(UserWarning):
     """Legal but probably unintended input: scene content, or a value that looks like a
     unit mistake (degrees for radians, centimetres for metres). The command line shows
     each as one ``warning:`` line; the input is used as given."""
+
+
+def unknown_field(allowed) -> str:
+    """The rule of an unknown key: the keys its table allows, by name, or that the
+    table takes none (never an empty list).
+
+    >>> unknown_field({"radius", "height"})
+    'unknown field (allowed: height, radius)'
+    >>> unknown_field(set())
+    'unknown field (this table takes no fields)'
+    """
+    names = sorted(allowed)
+    if not names:
+        return "unknown field (this table takes no fields)"
+    return f"unknown field (allowed: {', '.join(names)})"
+

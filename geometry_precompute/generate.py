@@ -30,7 +30,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .errors import InputError, shown
+from .errors import InputError, shown, unknown_field
 from .scene import Scene, SceneObject, Task
 from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
 from .template_files import BUILTIN_SET, TemplateSet, template_set
@@ -182,7 +182,7 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
         return dict(table)
     for key in table:
         if key not in _GENERATOR_KEYS:
-            raise bad(key, f"unknown field (allowed: {sorted(_GENERATOR_KEYS)})")
+            raise bad(key, unknown_field(_GENERATOR_KEYS))
     area = table.get("table", [1.3, 1.3])
     if not isinstance(area, list) or len(area) != 2:
         raise bad("table", f"must be [x, y] extents in m, got {shown(area)}")
@@ -208,7 +208,7 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
         kind = e["kind"]
         for key in e:
             if key not in _ENTRY_KEYS:
-                raise bad(f"{w}.{key}", f"unknown field (allowed: {sorted(_ENTRY_KEYS)})")
+                raise bad(f"{w}.{key}", unknown_field(_ENTRY_KEYS))
         allowed = {"mug": {"radius", "height"}, "cup": {"radius", "height"},
                    "box": {"half_extents"}, "mesh": {"folder", "scale"}}[kind]
         for key in ("radius", "height", "half_extents", "folder", "scale"):

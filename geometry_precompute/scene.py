@@ -24,7 +24,7 @@ from typing import Any
 
 import tomli_w
 
-from .errors import InputError, shown
+from .errors import InputError, shown, unknown_field
 from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
 from .fileio import MAX_DEPTH, check_depth, read_bytes_limited, write_atomic
 from .mesh_objects import MeshInfo
@@ -185,7 +185,7 @@ def _check_keys(table: Any, allowed: set[str], required: set[str], src: str, whe
         raise InputError(src, where or "<top>", "must be a table")
     for key in table:
         if key not in allowed:
-            raise InputError(src, f"{where}{key}", f"unknown field (allowed: {sorted(allowed)})")
+            raise InputError(src, f"{where}{key}", unknown_field(allowed))
     for key in sorted(required):
         if key not in table:
             raise InputError(src, f"{where}{key}", "missing required field")

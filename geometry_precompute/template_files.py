@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import InputError, shown
+from .errors import InputError, shown, unknown_field
 
 BUILTIN_FILE = Path(__file__).with_name("builtin_templates.toml")
 OBJECT_KINDS = ("mug", "cup", "box", "mesh")
@@ -371,7 +371,7 @@ def parse_template(name: str, raw: Any, src: str) -> Template:
         raise r.bad("", "must be a table")
     for key in raw:
         if key not in _TEMPLATE_KEYS:
-            raise r.bad(key, f"unknown field (allowed: {sorted(_TEMPLATE_KEYS)})")
+            raise r.bad(key, unknown_field(_TEMPLATE_KEYS))
     for key in ("fits", "shape", "center", "dims", "orientation"):
         if key not in raw:
             raise r.bad(key, "missing required field")
@@ -411,7 +411,7 @@ def parse_template(name: str, raw: Any, src: str) -> Template:
             raise r.bad(w, "must be a table {min, init, unit}")
         for key in p:
             if key not in _PARAM_KEYS:
-                raise r.bad(f"{w}.{key}", f"unknown field (allowed: {sorted(_PARAM_KEYS)})")
+                raise r.bad(f"{w}.{key}", unknown_field(_PARAM_KEYS))
         for key in ("min", "init"):
             if key not in p:
                 raise r.bad(f"{w}.{key}", "missing required field")

@@ -57,6 +57,12 @@ class _Parser(argparse.ArgumentParser):
               file=sys.stderr)
         sys.exit(2)
 
+    def _print_message(self, message: str, file=None) -> None:
+        # argparse drops a failed write of --help or --version silently (exit 0 with
+        # nothing written); a closed or full stdout is the machine's fault here too.
+        if message:
+            (file or sys.stderr).write(message)
+
 
 def _int_in(lo: int, hi: int | None = None):
     """An argparse type: an integer within [lo, hi]."""
@@ -267,8 +273,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status. Every fault ends in one line on
     stderr (``faults.report``): bad input 2, a fault of the machine 1, Ctrl-C 130, a
     bug of ours 70 (``SHACC_DEBUG=1`` shows the traceback of any of them)."""
-    from .faults import GuardedStdout
+    from .faults import GuardedStdout, guard_standard_streams
 
+    guard_standard_streams()
     argv = sys.argv[1:] if argv is None else list(argv)
     from .output import record_command
 
@@ -290,6 +297,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(argv: list[str]) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)  # imports neither NumPy nor dask
+    if isinstance(getattr(args, "json", None), str):  # --json /dev/stdout is --json -
+        from .output import stdout_alias
+
+        args.json = stdout_alias(args.json)
     if args.command == "sweep" and not (args.dry_run or args.scheduler):
         # Before this process imports NumPy, dask and the rest: the local cluster's fork
         # server imports the workers' modules meanwhile (a config that names a scheduler

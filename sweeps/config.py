@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
-from geometry_precompute.errors import shown
+from geometry_precompute.errors import shown, unknown_field
 from geometry_precompute.generate import MAX_TASKS
 from geometry_precompute.loading import scene_files
 from geometry_precompute.scene import Scene, read_toml, scene_to_dict
@@ -188,7 +188,7 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     src = str(source)
     for key in data:
         if key not in _TOP:
-            raise InputError(src, key, f"unknown field (allowed: {sorted(_TOP)})")
+            raise InputError(src, key, unknown_field(_TOP))
     name = data.get("name", Path(src).stem)
     if not isinstance(name, str) or not name:
         raise InputError(src, "name", "must be a non-empty string")

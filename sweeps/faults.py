@@ -86,10 +86,49 @@ def _silence_stdout() -> None:
         pass
 
 
+CLOSED = "standard output is closed"
+
+
+def guard_standard_streams() -> None:
+    """Standard input, output and error that were closed when the command started
+    (``shacc settings >&-``) are opened on /dev/null, so that no file the command opens
+    later takes their numbers (a result written to "standard output" would land in it);
+    Python's ``sys.stdout`` stays None then, which :class:`GuardedStdout` reports as
+    ``<stdout>: cannot write (standard output is closed)``, and a closed stderr
+    swallows the messages, not the exit status."""
+    for fd, mode in ((0, os.O_RDONLY), (1, os.O_WRONLY), (2, os.O_WRONLY)):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                opened = os.open(os.devnull, mode)
+                if opened != fd:
+                    os.dup2(opened, fd)
+                    os.close(opened)
+            except OSError:
+                pass
+    if sys.stderr is None:
+        try:
+            sys.stderr = open(os.devnull, "w")  # kept for the process's life
+        except OSError:
+            pass
+
+
+class _ClosedBuffer:
+    """The ``buffer`` of a closed stdout: every write is the fault of the machine."""
+
+    def write(self, data):
+        raise HostError("<stdout>", "write", CLOSED)
+
+    def flush(self):
+        raise HostError("<stdout>", "write", CLOSED)
+
+
 class GuardedStdout:
-    """stdout whose write and flush failures (a full disk behind ``> FILE``) are a
-    :class:`HostError` naming ``<stdout>``, not a bare ``OSError``; everything else is
-    the wrapped stream's."""
+    """stdout whose write and flush failures (a full disk behind ``> FILE``, a stdout
+    closed before the command began) are a :class:`HostError` naming ``<stdout>``, not
+    a bare ``OSError`` or an ``AttributeError``; everything else is the wrapped
+    stream's."""
 
     def __init__(self, stream):
         self._stream = stream
@@ -104,12 +143,20 @@ class GuardedStdout:
             raise HostError("<stdout>", "write", e.strerror or type(e).__name__) from None
 
     def write(self, text):
+        if self._stream is None:
+            raise HostError("<stdout>", "write", CLOSED)
         return self._guard(self._stream.write, text)
 
     def flush(self):
+        if self._stream is None:
+            return None  # nothing was written: nothing to lose
         return self._guard(self._stream.flush)
 
     def __getattr__(self, name):
+        if self._stream is None:
+            if name == "buffer":
+                return _ClosedBuffer()
+            raise HostError("<stdout>", "write", CLOSED)
         return getattr(self._stream, name)
 
 

@@ -14,6 +14,8 @@ from pathlib import Path
 from geometry_precompute import InputError
 from geometry_precompute.errors import HostError
 
+from .output import check_output_file, nearest_existing
+
 
 def _mapping(args) -> tuple[dict, str]:
     from geometry_precompute.scene import read_toml
@@ -40,12 +42,16 @@ def cmd_import_mjcf(args) -> int:
     out = Path(args.out)
     if out.suffix != ".toml":
         raise InputError("<arguments>", "--out", f"a scene file ends in .toml, got {str(out)!r}")
+    check_output_file(out, "--out")  # its folders exist, or can be made, and are writable
     mapping, src = _mapping(args)
     folder = out.parent if str(out.parent) else Path(".")
+    # The draft is written beside the nearest folder that exists (the same file system,
+    # so the moves below are renames); the missing folders are made only at the end.
+    base = nearest_existing(folder)
     try:
-        work = Path(tempfile.mkdtemp(prefix=".import-", dir=folder))
+        work = Path(tempfile.mkdtemp(prefix=".import-", dir=base))
     except OSError as e:
-        raise HostError(folder, "create a folder in", e.strerror or str(e)) from None
+        raise HostError(base, "make a working folder", e.strerror or str(e)) from None
     try:
         import tomli_w
 
@@ -58,6 +64,10 @@ def cmd_import_mjcf(args) -> int:
         except InputError as e:  # named by the scene it would have been, not the draft
             raise InputError(f"{out} (from {args.xml})", e.field, e.rule) from None
         meshes = [o["mesh"] for o in table["objects"] if o["kind"] == "mesh"]
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise HostError.of(e, folder, "make the folder") from None
         for name in meshes:
             os.replace(work / name, folder / name)
         os.replace(scene_file, out)

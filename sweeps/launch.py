@@ -14,8 +14,9 @@ import sys
 
 def entry() -> None:
     """Install the Ctrl-C handling (``interrupt``), then run :func:`sweeps.cli.main`."""
-    from . import interrupt
+    from . import faults, interrupt
 
+    faults.guard_standard_streams()  # before anything may print (Ctrl-C's line too)
     interrupt.install()
     from .cli import main
 

@@ -31,7 +31,8 @@ def clean_json(x: Any) -> Any:
     return x
 
 
-def _nearest_existing(path: Path) -> Path:
+def nearest_existing(path: Path) -> Path:
+    """``path`` or the nearest of its parents that exists (``.`` at worst)."""
     for p in (path, *path.parents):
         if p.exists() or p.is_symlink():
             return p
@@ -40,7 +41,7 @@ def _nearest_existing(path: Path) -> Path:
 
 def _check_parents(path: Path, option: str) -> None:
     """The folders above ``path`` exist or can be made, and can be written to."""
-    base = _nearest_existing(path.parent)
+    base = nearest_existing(path.parent)
     if not base.is_dir():
         raise InputError(path, option, f"{base} is a file, not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
@@ -82,6 +83,25 @@ def check_output_dir(path: str | Path, option: str, own: tuple[str, ...] = ()) -
     return path
 
 
+def stdout_alias(path: str) -> str:
+    """``-`` where ``path`` names this process's standard output under another name
+    (``/dev/stdout``, ``/dev/fd/1``, the file or pipe that ``> FILE`` or ``| jq``
+    opened), else ``path``: a JSON written there is then written as ``--json -``
+    writes it, with the readable summary on stderr, not mixed into it.
+
+    >>> stdout_alias("-"), stdout_alias("out.json")
+    ('-', 'out.json')
+    """
+    if path == "-":
+        return path
+    try:
+        target, out = os.stat(path), os.fstat(1)
+    except (OSError, ValueError):
+        return path
+    same = (target.st_dev, target.st_ino) == (out.st_dev, out.st_ino)
+    return "-" if same else path
+
+
 def write_output(path: str | Path, data: bytes) -> None:
     """A command's ``--json`` output: ``-`` is standard output, else :func:`write_atomic`
     (announced on stderr, which keeps stdout for results)."""
@@ -92,7 +112,7 @@ def write_output(path: str | Path, data: bytes) -> None:
                 sys.stdout.flush()
                 sys.stdout.buffer.write(data)
                 sys.stdout.flush()
-            except BrokenPipeError:
+            except (BrokenPipeError, HostError):
                 raise
             except OSError as e:
                 raise HostError("<stdout>", "write", e.strerror or type(e).__name__) from None

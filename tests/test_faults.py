@@ -59,6 +59,49 @@ def test_stdout_to_a_full_disk_is_one_line():
     assert_one_line(res, 1, "<stdout>", "No space left on device")
 
 
+@pytest.mark.parametrize("args", [["settings"], ["settings", "--json"], ["--version"],
+                                  ["--help"], ["precompute", SCENE, "--json", "-"]])
+def test_a_closed_stdout_is_one_line(args):
+    """``shacc settings >&-``: stdout closed before the command began (Python's
+    sys.stdout is None) is the machine's fault, in one line, not an internal error (or,
+    for --version and --help, a silent success)."""
+    res = subprocess.run([SHACC, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                         text=True, timeout=120, preexec_fn=lambda: os.close(1))
+    assert_one_line(res, 1, "<stdout>: cannot write (standard output is closed)")
+
+
+def test_a_closed_stderr_keeps_the_exit_status(tmp_path):
+    bad = tmp_path / "missing.toml"
+    res = subprocess.run([SHACC, "precompute", str(bad)], capture_output=True, timeout=120,
+                         preexec_fn=lambda: os.close(2))
+    assert res.returncode == 2 and res.stdout == b""
+    res = subprocess.run([SHACC, "settings"], capture_output=True, timeout=120,
+                         preexec_fn=lambda: os.close(2))
+    assert res.returncode == 0 and b"v_max" in res.stdout
+
+
+def test_files_opened_with_stdout_closed_do_not_take_its_place(tmp_path):
+    """With fd 1 closed, the first file a command opens would get number 1, and what
+    the command prints would land in it: the written JSON stays the JSON."""
+    out = tmp_path / "p.json"
+    res = subprocess.run([SHACC, "precompute", SCENE, "--json", str(out)],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                         timeout=120, preexec_fn=lambda: os.close(1))
+    assert res.returncode == 1 and "standard output is closed" in res.stderr
+    if out.exists():  # written before the summary failed: it is whole, and only JSON
+        json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("name", ["/dev/stdout", "/dev/fd/1"])
+def test_json_to_dev_stdout_is_json_to_stdout(name):
+    """``--json /dev/stdout`` (or ``/dev/fd/1``) is ``--json -``: the JSON alone on
+    stdout, the summary on stderr."""
+    res = shacc("precompute", SCENE, "--json", name)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["scene"] == "mug-behind-two"
+    assert "C_init" in res.stderr
+
+
 def test_a_symlink_loop_is_one_line(tmp_path):
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")

@@ -192,3 +192,23 @@ def test_a_cylinder_asked_to_be_a_box_is_one_line(kitchen, tmp_path, capsys):
                  "--map", str(mapping)]) == 2
     assert f"{mapping}: objects.mug_body.kind: a cylinder is a mug or a cup, got 'box'" in \
         capsys.readouterr().err
+
+
+def test_out_into_folders_that_do_not_exist(kitchen, tmp_path, capsys):
+    """``--out`` into folders that do not exist makes them (as every output file of the
+    command line does); below a file it is one line naming the path, and nothing is
+    made; a failed import makes no folder."""
+    task = ["--task", "t=crate:top_grasp"]
+    out = tmp_path / "new" / "deeper" / "k.toml"
+    assert main(["import-mjcf", str(kitchen), "--out", str(out), *task]) == 0
+    assert load_scene(out).tasks[0].id == "t"
+    (tmp_path / "afile").write_text("")
+    below = tmp_path / "afile" / "sub" / "k.toml"
+    capsys.readouterr()
+    assert main(["import-mjcf", str(kitchen), "--out", str(below), *task]) == 2
+    err = capsys.readouterr().err
+    assert f"{below}: --out: {tmp_path / 'afile'} is a file, not a folder" in err
+    failed = tmp_path / "never" / "k.toml"
+    assert main(["import-mjcf", str(kitchen), "--out", str(failed),
+                 "--task", "t=ball:top_grasp"]) == 2
+    assert not (tmp_path / "never").exists()

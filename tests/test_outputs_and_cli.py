@@ -168,6 +168,20 @@ def test_dry_run_does_not_build_random_scenes():
     assert 5 * 10_000_000 * 108 <= info["rollouts"] <= 10 * 10_000_000 * 108
 
 
+def test_dry_run_of_a_million_points_is_refused_in_one_line(tmp_path, capsys):
+    """Axes whose product is 10^6 points: one line, exit 2, before anything is built."""
+    cfg = tmp_path / "big.toml"
+    values = lambda lo: ", ".join(f"{lo + 0.01 * i:.2f}" for i in range(10))  # noqa: E731
+    cfg.write_text('name = "big"\n[source]\nkind = "random"\ncount = 10\n[axes]\n'
+                   + "".join(f"{k} = [{values(lo)}]\n" for k, lo in (
+                       ("v_max", 0.1), ("omega_max", 1.0), ("dt", 0.01),
+                       ("shrink_step", 0.01), ("activation_tol", 0.001), ("user_noise", 0.0))))
+    assert main(["sweep", str(cfg), "--dry-run"]) == 2
+    out = capsys.readouterr()
+    assert out.out == "" and out.err.count("\n") == 1, out.err
+    assert "give 1000000 points, more than 100000" in out.err
+
+
 def test_dry_run_budgets_collision_checks(tmp_path):
     """The per-chunk memory estimate follows the memory model: a point with collision
     checks needs more than the same point without, for random and for file sources."""

@@ -99,7 +99,10 @@ def test_unknown_bound_and_fixed():
     _expect(d, "bounds.length", "unknown field")
     d = base()
     d["tasks"][1]["fixed"] = {"height": 0.2}
-    _expect(d, "fixed.height", "unknown field")
+    _expect(d, "fixed.height", "unknown field (allowed: handle_offset)")
+    d = base()
+    d["objects"][0]["mass"] = 1.0
+    _expect(d, "objects[0].mass", "unknown field (allowed: half_extents, height, id, ")
 
 
 def test_unknown_setting():

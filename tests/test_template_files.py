@@ -333,3 +333,13 @@ def test_precomputed_scenes_pickle_with_plain_pickle(tmp_path):
     for a, b in zip(result.spaces, back.spaces, strict=True):
         for q in (a.q_init, a.q_min):
             assert a.shape(q) == b.shape(q)
+
+
+def test_a_fixed_dimension_of_a_template_that_has_none_is_named_so(tmp_path):
+    """A template without fixed dimensions: ``[tasks.fixed]`` takes no field, and the
+    rule says so instead of listing none ("allowed: []")."""
+    path = _scene(tmp_path, extra_tasks=[{"id": "f", "object": "mug", "template": "angled_top",
+                                          "fixed": {"height": 0.2}}])
+    with pytest.raises(InputError, match=r"tasks\[f\]\.fixed\.height: unknown field "
+                       r"\(this table takes no fields\)"):
+        load_scene(path)
