@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -74,5 +75,5 @@ def cmd_import_mjcf(args) -> int:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     print(f"wrote {out} ({len(table['objects'])} objects, {len(table['tasks'])} tasks"
-          + (f", {len(meshes)} mesh files beside it" if meshes else "") + ")")
+          + (f", {len(meshes)} mesh files beside it" if meshes else "") + ")", file=sys.stderr)
     return 0

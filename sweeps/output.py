@@ -129,10 +129,31 @@ def announce(path: str | Path) -> None:
         print(f"wrote {path}", file=sys.stderr)
 
 
+class _Aside:
+    """stderr for a summary that is not the command's result: a write it refuses (a
+    full or closed stderr) loses the summary, never the result on stdout."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except (OSError, ValueError, AttributeError):
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+
+
 def human_output(json_target: str | None):
     """Where a command's readable summary goes: stdout, or stderr when the JSON itself
-    goes to stdout (``--json -``), so that stdout parses."""
-    return contextlib.redirect_stdout(sys.stderr) if json_target == "-" else \
+    goes to stdout (``--json -``), so that stdout parses; there a stderr that cannot be
+    written loses the summary, not the JSON."""
+    return contextlib.redirect_stdout(_Aside(sys.stderr)) if json_target == "-" else \
         contextlib.nullcontext()
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import os
+import sys
 from pathlib import Path
 from typing import NamedTuple
 
@@ -205,7 +206,7 @@ def cmd_export(args) -> int:
     check_output_file(args.out, "OUT")
     r = load_and_precompute(args.scene, args.set)
     write_atomic(args.out, scene_to_mjcf(r).encode())
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}", file=sys.stderr)
     return 0
 
 
@@ -222,5 +223,5 @@ def cmd_render(args) -> int:
     path = render_scene(r, Path(args.out), args.width, args.height, args.mode, spec)
     if path is not None:
         print(path.description)
-    print(f"wrote {args.out}")
+    print(f"wrote {args.out}", file=sys.stderr)
     return 0

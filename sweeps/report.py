@@ -22,6 +22,7 @@ import base64
 import html
 import io
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -292,5 +293,5 @@ def cmd_report(args) -> int:
     out = Path(args.out) if args.out else (src / "report.html" if src.is_dir()
                                            else src.with_suffix(".html"))
     write_atomic(out, text.encode())
-    print(f"wrote {out}")
+    print(f"wrote {out}", file=sys.stderr)
     return 0

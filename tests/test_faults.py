@@ -92,6 +92,21 @@ def test_files_opened_with_stdout_closed_do_not_take_its_place(tmp_path):
         json.loads(out.read_text())
 
 
+def test_a_full_stderr_loses_the_summary_not_the_json():
+    """``--json -`` puts the summary on stderr; a stderr that cannot be written loses
+    the summary, and the JSON on stdout is still whole."""
+    with open("/dev/full", "w") as full:
+        res = subprocess.run([SHACC, "precompute", SCENE, "--json", "-"], stdout=subprocess.PIPE,
+                             stderr=full, text=True, timeout=120)
+    assert res.returncode == 0 and json.loads(res.stdout)["scene"] == "mug-behind-two"
+
+
+def test_log_lines_go_to_stderr(tmp_path):
+    """stdout holds results only: "wrote FILE" is a log line."""
+    res = shacc("export-mjcf", SCENE, str(tmp_path / "m.xml"))
+    assert res.returncode == 0 and res.stdout == "" and "wrote" in res.stderr
+
+
 @pytest.mark.parametrize("name", ["/dev/stdout", "/dev/fd/1"])
 def test_json_to_dev_stdout_is_json_to_stdout(name):
     """``--json /dev/stdout`` (or ``/dev/fd/1``) is ``--json -``: the JSON alone on
