@@ -49,8 +49,9 @@ def inject(nb, parameters: Mapping[str, Any]) -> None:
     known = parameter_names(nb)
     unknown = [k for k in parameters if k not in known]
     if unknown:
-        raise ValueError(f"no parameter {', '.join(unknown)}; this notebook's parameters: "
-                         f"{', '.join(known)}")
+        has = f"this notebook's parameters: {', '.join(known)}" if known else \
+            "this notebook has no parameters"
+        raise ValueError(f"no parameter {', '.join(unknown)}; {has}")
     cell = nbformat.v4.new_code_cell("\n".join(f"{k} = {v!r}" for k, v in parameters.items()))
     cell.metadata["tags"] = ["injected-parameters"]
     nb.cells.insert(parameters_cell(nb) + 1, cell)

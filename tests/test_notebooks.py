@@ -60,3 +60,24 @@ def test_parameters_are_injected_and_checked(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["scene_gallery", "-p", "GIRD=3"])
     assert "GIRD" in capsys.readouterr().err
+
+
+def test_an_unknown_parameter_names_what_the_notebook_has():
+    """The error names the notebook's parameters, or says it has none (never an empty
+    list)."""
+    import nbformat
+    import pytest
+
+    from sweeps.notebook_runner import inject
+
+    def notebook(source: str):
+        cell = nbformat.v4.new_code_cell(source)
+        cell.metadata["tags"] = ["parameters"]
+        return nbformat.v4.new_notebook(cells=[cell])
+
+    with pytest.raises(ValueError, match=r"no parameter SCENES; this notebook's parameters: "
+                       r"FIGURES, COLUMNS$"):
+        inject(notebook("FIGURES = None\nCOLUMNS = 2"), {"SCENES": 3})
+    with pytest.raises(ValueError, match=r"no parameter SCENES; this notebook has no "
+                       r"parameters$"):
+        inject(notebook("# nothing to set"), {"SCENES": 3})
