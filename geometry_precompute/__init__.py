@@ -4,32 +4,32 @@ clusters, Shrinking and the bake (never imports jax).
 The names below are loaded when first used (PEP 562), so that importing one light
 module of the package (``errors``, ``fileio``, ``schema``) does not import NumPy and
 the scene model: the command line reads its arguments, and starts its workers, before
-it needs them.
+it needs them. No module is named like a function the package exports (``bake`` lives
+in ``baking``, ``precompute`` in ``precomputing``), so importing a module never hides
+one.
 """
 
 from __future__ import annotations
 
 import importlib
-import sys
-import types
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # what __getattr__ loads, for type checkers and editors
-    from .bake import BakedScenes, bake
+    from .baking import BakedScenes, bake
     from .errors import HostError, InputError
     from .generate import random_scene
     from .loading import load_scene, scene_from_dict
-    from .precompute import PrecomputeResult, precompute
+    from .precomputing import PrecomputeResult, precompute
     from .scene import Scene, save_scene
     from .settings import DEFAULTS, SPECS, Settings
 
 _WHERE = {
-    "BakedScenes": "bake", "bake": "bake",
+    "BakedScenes": "baking", "bake": "baking",
     "HostError": "errors", "InputError": "errors",
     "random_scene": "generate",
     "load_scene": "loading", "scene_from_dict": "loading",
-    "PrecomputeResult": "precompute", "precompute": "precompute",
+    "PrecomputeResult": "precomputing", "precompute": "precomputing",
     "Scene": "scene", "save_scene": "scene",
     "DEFAULTS": "settings", "SPECS": "settings", "Settings": "settings",
 }
@@ -46,20 +46,6 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *_WHERE})
-
-
-class _Package(types.ModuleType):
-    """Two modules share a name with the function they define (``bake``,
-    ``precompute``); importing the module must not hide the function, as Python's
-    import would by setting the package's attribute to the module."""
-
-    def __setattr__(self, name: str, value) -> None:
-        if name in _WHERE and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 def shipped_scene_paths() -> list[Path]:

@@ -14,11 +14,11 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .bake import bake
+from .baking import bake
 from .cache import cached, default_folder
 from .generate import random_scene
 from .loading import load_scene
-from .precompute import PrecomputeResult, precompute
+from .precomputing import PrecomputeResult, precompute
 from .scene import Scene
 from .settings import DEFAULTS
 

@@ -5,7 +5,7 @@ A sweep precomputes each scene once per host and reads it back on every later sw
 The entries hold data only (JSON: the scene, its Shrinking parameters, C, clusters,
 d, h), never code: the cache folder may be shared by a cluster's hosts, and a pickle
 read there would run whatever its writer put in it. Everything else of a
-:class:`~geometry_precompute.precompute.PrecomputeResult` (the task spaces, their
+:class:`~geometry_precompute.precomputing.PrecomputeResult` (the task spaces, their
 shapes) is rebuilt from the scene and the settings, which is what the precompute
 itself does before its geometry, and costs a fraction of it.
 
@@ -32,7 +32,7 @@ import numpy as np
 from .errors import HostError, InputError
 from .fileio import cache_home, write_atomic
 from .generate import GENERATOR_VERSION, random_scene
-from .precompute import PRECOMPUTE_VERSION, PrecomputeResult, precompute
+from .precomputing import PRECOMPUTE_VERSION, PrecomputeResult, precompute
 from .scene import Scene, parse_scene, scene_to_dict
 from .settings import Settings
 from .templates import resolve_tasks

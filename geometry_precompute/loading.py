@@ -33,7 +33,7 @@ def load_scene(path: str | Path) -> Scene:
 
     Values that are legal but look like a unit mistake (a yaw above 2 pi, sizes or
     positions that look like centimetres) give a :class:`SceneWarning`. Whether objects
-    interpenetrate is checked by :func:`~geometry_precompute.precompute.precompute`.
+    interpenetrate is checked by :func:`~geometry_precompute.precomputing.precompute`.
 
     Example::
 

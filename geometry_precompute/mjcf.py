@@ -17,7 +17,7 @@ import numpy as np
 from .bodies import object_body, object_solid
 from .frames import quat_of_rotation, yaw_matrix
 from .meshes import shape_trimesh
-from .precompute import PrecomputeResult
+from .precomputing import PrecomputeResult
 from .shapes import Shape
 
 INIT_RGBA = "0.9 0.1 0.1 0.22"

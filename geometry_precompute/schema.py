@@ -1,6 +1,6 @@
 """The bake's schema: every array that crosses from the CPU half to the JAX half,
 its shape and meaning, the integer codes inside them, and the static layout of a
-batch. Defined once here; the bake (``bake.py``) fills these fields and the JAX
+batch. Defined once here; the bake (``baking.py``) fills these fields and the JAX
 half (``shacc_jax.types``) builds its pytrees from the same lists. Plain Python:
 importing it imports neither JAX nor the mesh libraries.
 

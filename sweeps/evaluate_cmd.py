@@ -102,7 +102,7 @@ def print_tasks(ev, s: int, with_scene: bool = False) -> None:
 def print_plan(results, modes) -> int:
     """``shacc evaluate --plan``: the RunPlan of the batch, nothing evaluated."""
     import shacc_jax
-    from geometry_precompute.bake import bake
+    from geometry_precompute.baking import bake
 
     baked = bake(results)
     plain = [m for m in modes if m != "optimized"]

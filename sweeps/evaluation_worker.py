@@ -23,7 +23,7 @@ from types import SimpleNamespace
 import numpy as np
 import pyarrow as pa
 
-from geometry_precompute.bake import concatenate
+from geometry_precompute.baking import concatenate
 
 from . import tables
 from .plan import Chunk, Shapes

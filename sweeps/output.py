@@ -15,7 +15,7 @@ from typing import Any
 
 from geometry_precompute import HostError, InputError
 from geometry_precompute.fileio import COMMIT, write_atomic
-from geometry_precompute.precompute import PrecomputeResult
+from geometry_precompute.precomputing import PrecomputeResult
 
 
 def clean_json(x: Any) -> Any:

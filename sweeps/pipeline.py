@@ -11,7 +11,7 @@ import numpy as np
 
 import shacc_jax
 from geometry_precompute import BakedScenes, PrecomputeResult
-from geometry_precompute.bake import bake
+from geometry_precompute.baking import bake
 from shacc_jax.types import OUTCOMES, Evaluation, Search
 
 from . import compile_cache

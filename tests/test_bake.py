@@ -48,7 +48,7 @@ def test_the_typed_classes_mirror_the_schema():
     import dataclasses
     import re
 
-    from geometry_precompute.bake import BakedScenes
+    from geometry_precompute.baking import BakedScenes
     from shacc_jax.types import Geometry, Params, SearchProblem
 
     fields = schema.GEOMETRY + schema.PARAMS + schema.SEARCH

@@ -233,7 +233,7 @@ def test_cli_module_imports_nothing_heavy():
     cluster's, or the Ctrl-C handler and the fault reports, imports none of them (of the
     CPU half only the light modules: geometry_precompute loads its names lazily)."""
     heavy = ("numpy", "dask", "distributed", "jax", "pyarrow", "geometry_precompute.scene",
-             "geometry_precompute.settings", "geometry_precompute.bake")
+             "geometry_precompute.settings", "geometry_precompute.baking")
     # The parser too: a sweep's fork server starts once its arguments are parsed, before
     # this process imports NumPy and dask (sweeps.cli._run).
     code = (f"import sys, sweeps.cli, sweeps.cluster, sweeps.interrupt, sweeps.faults; "

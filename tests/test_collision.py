@@ -230,8 +230,8 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     # Alone, it loads neither the mesh libraries nor the CPU half's scene model: of
     # geometry_precompute only the schema and what it needs (errors, the metrics).
     cpu_half = ("'geometry_precompute.loading', 'geometry_precompute.scene', "
-                "'geometry_precompute.templates', 'geometry_precompute.precompute', "
-                "'geometry_precompute.bake'")
+                "'geometry_precompute.templates', 'geometry_precompute.precomputing', "
+                "'geometry_precompute.baking'")
     alone = ("import sys\nimport shacc_jax\n"
              f"loaded = [m for m in {heavy}[1:] + ('scipy.spatial', {cpu_half}) "
              "if m in sys.modules]\n"

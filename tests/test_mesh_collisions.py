@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 import shacc_jax
 from geometry_precompute import bake, precompute, scene_from_dict
-from geometry_precompute.bake import concatenate
+from geometry_precompute.baking import concatenate
 from geometry_precompute.batch import bake_batch
 from geometry_precompute.mjcf import scene_to_mjcf
 from geometry_precompute.schema import MESH

@@ -32,14 +32,19 @@ def test_importing_the_packages_changes_nothing():
     got = _run("import os, json, jax\n"
                "before = dict(os.environ), jax.config.jax_num_cpu_devices\n"
                "import shacc_jax, geometry_precompute, sweeps, sweeps.cli, sweeps.pipeline\n"
-               "import geometry_precompute.bake, geometry_precompute.precompute\n"
+               "import geometry_precompute.baking, geometry_precompute.precomputing\n"
                "after = dict(os.environ), jax.config.jax_num_cpu_devices\n"
                "from jax._src import xla_bridge\n"
+               "import sys, types\n"
                "print(json.dumps({'same': before == after,\n"
                "                  'started': xla_bridge.backends_are_initialized(),\n"
+               "                  'plain': all(type(sys.modules[m]) is types.ModuleType\n"
+               "                               for m in ('shacc_jax', 'sweeps',\n"
+               "                                         'geometry_precompute')),\n"
                "                  'bake': callable(geometry_precompute.bake)}))")
     assert got["same"] and not got["started"]
-    assert got["bake"]  # the function, not its module (no module object swapped)
+    # No module object swapped, and the package's functions are not hidden by modules.
+    assert got["plain"] and got["bake"]
 
 
 @pytest.mark.skipif(os.uname().machine not in determinism.X86_64, reason="x86-64's pin")

@@ -65,7 +65,7 @@ def test_padded_shapes_change_no_result():
     import dataclasses
 
     import shacc_jax
-    from geometry_precompute.bake import concatenate
+    from geometry_precompute.baking import concatenate
 
     results = [precompute(s, s.settings(overrides={"start_grid": [2, 3]}))
                for s in (random_scene(7, "uniform", 3, 4), random_scene(8, "gaussian", 3, 4))]

@@ -34,7 +34,7 @@ from .bodies import object_body
 from .errors import InputError
 from .frames import yaw_matrix
 from .population import POPULATED, Population
-from .precompute import PrecomputeResult
+from .precomputing import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS, batch_layout
 from .settings import population_range
 from .starts import optimize_start_poses, start_plane, start_poses
