@@ -32,9 +32,9 @@ NOTEBOOKS_OUT ?= build/notebooks
 FIGURES ?= $(NOTEBOOKS_OUT)
 notebooks: $(BIN)/shacc
 	mkdir -p $(NOTEBOOKS_OUT) $(FIGURES)
-	$(BIN)/python -m sweeps.notebook_runner --out $(NOTEBOOKS_OUT) -p FIGURES=$(abspath $(FIGURES))
+	$(BIN)/python -m sweeps.app.notebook_runner --out $(NOTEBOOKS_OUT) -p FIGURES=$(abspath $(FIGURES))
 
 # The reference as a site in build/site (warnings are errors); its generated tables first.
 docs: $(BIN)/shacc
-	$(BIN)/python -m sweeps.reference
+	$(BIN)/python -m sweeps.app.reference
 	$(BIN)/mkdocs build --strict

@@ -16,7 +16,7 @@ run() {  # key (A or B), what, dir, out
   TIMEFORMAT="$key $what: wall %R s"
   (cd "$dir" && export SHACC_COMPILE_CACHE="$tmp/compiled-$key" \
     PYTHONPATH="$dir${BASE_PYTHONPATH:+:$BASE_PYTHONPATH}" && \
-    time python3 -m sweeps.cli sweep "$config" --out "$out" --workers "$workers" \
+    time python3 -m sweeps sweep "$config" --out "$out" --workers "$workers" \
     --cache "$tmp/precompute-$key" --quiet > "$out.json")
 }
 run A first "$a" "$tmp/a0"

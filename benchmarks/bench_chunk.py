@@ -28,10 +28,15 @@ def main() -> None:
 
     from geometry_precompute.batch import precompute_batch
     from sweeps import compile_cache
-    from sweeps.cluster import connect
     from sweeps.config import parse_config
-    from sweeps.evaluation_worker import ChunkJob, encode_chunk, evaluate_chunk, join_chunk
-    from sweeps.plan import plan, precompute_batches, shapes
+    from sweeps.distributed.cluster import connect
+    from sweeps.distributed.evaluation_worker import (
+        ChunkJob,
+        encode_chunk,
+        evaluate_chunk,
+        join_chunk,
+    )
+    from sweeps.distributed.plan import plan, precompute_batches, shapes
 
     compile_cache.enable()
     cfg = parse_config({"name": "chunk", "chunk": args.scenes, "source": {

@@ -55,7 +55,7 @@ def main() -> None:
     ap.add_argument("--bake", help="a bake from bench_rollouts.py bake (accelerator form)")
     ap.add_argument("--scenes", type=int, default=1000)
     args = ap.parse_args()
-    cmd = [sys.executable, "-m", "sweeps.cli", "evaluate", args.scene]
+    cmd = [sys.executable, "-m", "sweeps", "evaluate", args.scene]
     if args.bake:
         code = BAKE_CHILD.format(bench=str(ROOT / "benchmarks"), bake=args.bake, n=args.scenes)
         cmd = [sys.executable, "-c", code]

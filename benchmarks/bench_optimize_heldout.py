@@ -37,7 +37,7 @@ def _precompute(item):
 
 
 def _summary(name, u_shr, u_opt, one, chosen, seconds, n_boot, seed) -> dict:
-    from sweeps.stats import mean_ci
+    from sweeps.analysis.stats import mean_ci
 
     gain = u_opt - u_shr
     lost = gain < -one - 1e-12
@@ -70,7 +70,7 @@ def main() -> None:
     from shacc_jax import run
     from shacc_jax.optimize import winner_name
     from sweeps import compile_cache
-    from sweeps.inputs import parse_sets
+    from sweeps.app.inputs import parse_sets
 
     compile_cache.enable()
     sets = parse_sets(args.set)

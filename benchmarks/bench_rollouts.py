@@ -172,7 +172,7 @@ def cmd_run(args) -> None:
         if args.grid:
             geometry = _regrid(geometry, *args.grid)
             layout = dataclasses.replace(layout, n_starts=geometry.starts.shape[1])
-        if args.stepping:  # tuning: the stepped kernel's scheme (users.STEPPING)
+        if args.stepping:  # tuning: the stepped kernel's scheme (stepping.STEPPING)
             layout = dataclasses.replace(layout, stepping=tuple(args.stepping))
         if args.meta:  # "general" on yaw-only scenes: the Markley path
             layout = dataclasses.replace(layout, meta_formula=args.meta)
@@ -369,7 +369,7 @@ def main() -> None:
                    help="with --user: each rollout draws its user, uniform on [0, 2 x]")
     r.add_argument("--stepping", type=int, nargs=2, metavar=("SHARE", "UNROLL"),
                    help="stepped users: check 1/SHARE of the lanes in full per step, "
-                   "UNROLL steps per loop iteration (users.STEPPING)")
+                   "UNROLL steps per loop iteration (stepping.STEPPING)")
     r.add_argument("--json")
     r.set_defaults(func=cmd_run)
     k = sub.add_parser("kernels", help="count the device kernels of one evaluation")

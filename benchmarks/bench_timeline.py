@@ -32,12 +32,12 @@ def main() -> None:
     ap.add_argument("--scheduler")
     args = ap.parse_args()
     if not args.scheduler:  # first thing, as ``shacc sweep`` does
-        from sweeps.cluster import start_fork_server
+        from sweeps.distributed.cluster import start_fork_server
 
         start_fork_server()
-    from sweeps import cluster
     from sweeps.config import load_config
-    from sweeps.runner import run_sweep
+    from sweeps.distributed import cluster
+    from sweeps.distributed.runner import run_sweep
 
     seen: dict = {}
     connect = cluster.connect
@@ -67,7 +67,7 @@ def main() -> None:
 
 
 def _warm_up_marks() -> dict:
-    from sweeps.evaluation_worker import WARM_UP_MARKS
+    from sweeps.distributed.evaluation_worker import WARM_UP_MARKS
 
     return dict(WARM_UP_MARKS)
 

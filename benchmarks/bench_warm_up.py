@@ -34,9 +34,9 @@ def main() -> None:
     lap("backend")
     jnp.zeros(1).block_until_ready()
     lap("first device operation")
-    from sweeps import evaluation_worker as ew
+    from sweeps.distributed import evaluation_worker as ew
 
-    lap("import sweeps.evaluation_worker")
+    lap("import sweeps.distributed.evaluation_worker")
     import scipy.spatial.transform  # noqa: F401  (the bake's start orientations)
 
     lap("import scipy.spatial.transform")
@@ -44,10 +44,10 @@ def main() -> None:
 
     lap("import sweeps.pipeline")
     from sweeps.config import load_config
-    from sweeps.runner import _warm_up_job
+    from sweeps.distributed.runner import _warm_up_job
 
     cfg = load_config(config)
-    from sweeps.plan import plan
+    from sweeps.distributed.plan import plan
 
     job, ref = _warm_up_job(cfg, plan(cfg), cfg.scenes() if cfg.source["kind"] == "files"
                             else None)

@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--sigma", type=float, nargs="*", default=[], help="gaussian: sigmas, m")
     ap.add_argument("--workers", type=int, default=os.cpu_count())
     args = ap.parse_args()
-    from sweeps.stats import mean_ci
+    from sweeps.analysis.stats import mean_ci
 
     jobs = [("uniform", h, 0.10) for h in args.half] + [("gaussian", 0.30, s)
                                                         for s in args.sigma]

@@ -14,7 +14,7 @@ for run in cold empty warm; do
   cache=$tmp/precompute-$run
   [ "$run" = warm ] && cache=$tmp/precompute-empty
   TIMEFORMAT="$run: wall %R s"
-  time python3 -m sweeps.cli sweep "$config" --out "$tmp/out-$run" --workers "$workers" \
+  time python3 -m sweeps sweep "$config" --out "$tmp/out-$run" --workers "$workers" \
     --cache "$cache" --quiet > "$tmp/$run.json"
   cat "$tmp/$run.json"
 done

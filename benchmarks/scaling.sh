@@ -11,11 +11,11 @@ tmp=$(mktemp -d)
 export SHACC_COMPILE_CACHE=$tmp/compiled
 sed "s/^count = .*/count = 1000/" benchmarks/e2e_10k.toml > "$tmp/compile.toml"
 sed "s/^count = .*/count = $count/" benchmarks/e2e_10k.toml > "$tmp/sweep.toml"
-python3 -m sweeps.cli sweep "$tmp/compile.toml" --out "$tmp/out-compile" \
+python3 -m sweeps sweep "$tmp/compile.toml" --out "$tmp/out-compile" \
   --cache "$tmp/precompute-compile" --quiet > /dev/null
 for w in $workers; do
   TIMEFORMAT="workers $w: wall %R s"
-  time python3 -m sweeps.cli sweep "$tmp/sweep.toml" --out "$tmp/out-$w" --workers "$w" \
+  time python3 -m sweeps sweep "$tmp/sweep.toml" --out "$tmp/out-$w" --workers "$w" \
     --cache "$tmp/precompute-$w" --quiet > "$tmp/$w.json"
   cat "$tmp/$w.json"
   rm -rf "$tmp/out-$w" "$tmp/precompute-$w"

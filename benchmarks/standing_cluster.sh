@@ -6,7 +6,7 @@
 #   again  - the same scenes: precompute cache warm, the program in the worker's memory;
 #   again2 - once more.
 # Prints each run's wall time (the whole command) and its JSON summary. Extra options
-# for every `dask worker` in $WORKER_OPTIONS (e.g. "--preload sweeps.worker_setup").
+# for every `dask worker` in $WORKER_OPTIONS (e.g. "--preload sweeps.distributed.worker_setup").
 #   bash benchmarks/standing_cluster.sh [CONFIG] [WORKERS]
 set -euo pipefail
 config=${1:-benchmarks/e2e_10k.toml}
@@ -28,7 +28,7 @@ done
 python3 -c "from distributed import Client; Client('$addr', timeout=60).wait_for_workers($workers + ${gpus:-0}, timeout=120)"
 for run in first again again2; do
   TIMEFORMAT="$run: wall %R s"
-  time python3 -m sweeps.cli sweep "$config" --out "$tmp/out-$run" --scheduler $addr \
+  time python3 -m sweeps sweep "$config" --out "$tmp/out-$run" --scheduler $addr \
     --cache "$tmp/precompute" --quiet > "$tmp/$run.json"
   cat "$tmp/$run.json"
 done

@@ -288,7 +288,7 @@ def _placed_hull(obj, center) -> tuple[np.ndarray, np.ndarray]:
 
 def scene_key(scene) -> int:
     """The scene's own number, in [0, 2^31): a CRC-32 of its name, objects and tasks.
-    It keys the simulated users' random numbers (``shacc_jax.users``), so that a
+    It keys the simulated users' random numbers (``shacc_jax.streams``), so that a
     rollout draws the same numbers whatever batch, piece or device it runs in.
 
     >>> from geometry_precompute import load_scene, shipped_scene_paths

@@ -2,7 +2,7 @@
 sweep point (CPU only, no JAX).
 
 The local cluster's precompute workers run these functions as tasks
-(``sweeps.cluster``): :func:`precompute_batch` for ``shacc sweep``,
+(``sweeps.distributed.cluster``): :func:`precompute_batch` for ``shacc sweep``,
 :func:`precompute_scene` for ``shacc reproduce``. A worker imports the module of the
 task it is sent, so this module imports nothing from JAX (a test holds this).
 """

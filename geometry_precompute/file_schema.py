@@ -1,7 +1,7 @@
 """The JSON Schema (draft 2020-12) of the scene file and of a settings table, built from
 the loaders' own definitions: the allowed keys and templates of ``scene`` and the
 limits of ``settings`` (every setting's rule carries its schema). ``shacc schema
-scene`` prints it (``sweeps.schema_cmd`` adds the sweep config's), for editors whose
+scene`` prints it (``sweeps.app.schema_cmd`` adds the sweep config's), for editors whose
 TOML plugin validates against a JSON Schema, and for other tools.
 
 A schema cannot state every rule; those are listed in each schema's ``description``

@@ -31,7 +31,9 @@ import os
 import stat
 import tempfile
 import threading
+import tomllib
 from pathlib import Path
+from typing import Any
 
 from .errors import HostError, InputError
 
@@ -169,3 +171,23 @@ def abandon_pending() -> None:
             os.unlink(tmp)
         except OSError:
             pass
+
+
+def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
+    """Parse a TOML file; anything that is not one (missing, a folder, unreadable,
+    larger than :data:`MAX_TEXT_BYTES`, not UTF-8 text, bad syntax, nested deeper than
+    :data:`MAX_DEPTH`) is an InputError naming the file, never a traceback."""
+    path = Path(path)
+    data = read_bytes_limited(path, what)
+    try:
+        parsed = tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise InputError(path, "<file>", f"is not UTF-8 text (byte {e.start}); expected "
+                         f"{what}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
+    except RecursionError:
+        raise InputError(path, "<nesting>", f"tables and arrays nested deeper than "
+                         f"{MAX_DEPTH} levels") from None
+    check_depth(parsed, str(path))
+    return parsed

@@ -18,7 +18,8 @@ import numpy as np
 
 from .bodies import inside_object
 from .errors import InputError
-from .scene import Scene, SceneWarning, parse_scene, read_toml
+from .fileio import read_toml
+from .scene import Scene, SceneWarning, parse_scene
 from .templates import resolve_tasks
 
 

@@ -8,12 +8,12 @@ A population setting is a table with one key::
     user_tremor = {values = [0.0, 0.01, 0.02]}  # one of the values, each as likely
 
 Each rollout draws its own value from the counter-based stream that keys its other random
-numbers (seed, scene, task, start: ``shacc_jax.users``), so a rollout is the same user in
+numbers (seed, scene, task, start: ``shacc_jax.streams``), so a rollout is the same user in
 every mode and in every batch. The drawn values are in the rollout table.
 
 This module reads and checks the tables (one-line errors naming the field and the rule) and
 encodes them as the bake's arrays (:func:`encode`); the draw itself is JAX's
-(``shacc_jax.users.population_values``). Plain Python: no JAX, no NumPy.
+(``shacc_jax.populations.population_values``). Plain Python: no JAX, no NumPy.
 """
 
 from __future__ import annotations

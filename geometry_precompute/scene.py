@@ -16,7 +16,6 @@ One key beyond the scene format (reference/scenes) is accepted: an optional top-
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +25,8 @@ import tomli_w
 
 from .errors import InputError, shown, unknown_field
 from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
-from .fileio import MAX_DEPTH, check_depth, read_bytes_limited, write_atomic
+from .fileio import check_depth, write_atomic
+from .fileio import read_toml as read_toml  # its home before fileio.py
 from .mesh_objects import MeshInfo
 from .settings import (
     COORD_LIMIT,
@@ -333,26 +333,6 @@ def parse_scene(data: Mapping[str, Any], source: str = "<scene>") -> Scene:
     scene = Scene(name, tuple(objects.values()), tuple(tasks.values()), settings_raw,
                   description, src, templates)
     return scene
-
-
-def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
-    """Parse a TOML file; anything that is not one (missing, a folder, unreadable,
-    larger than ``fileio.MAX_TEXT_BYTES``, not UTF-8 text, bad syntax, nested deeper than
-    ``fileio.MAX_DEPTH``) is an InputError naming the file, never a traceback."""
-    path = Path(path)
-    data = read_bytes_limited(path, what)
-    try:
-        parsed = tomllib.loads(data.decode("utf-8"))
-    except UnicodeDecodeError as e:
-        raise InputError(path, "<file>", f"is not UTF-8 text (byte {e.start}); expected "
-                         f"{what}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(path, "<toml>", f"not valid TOML: {e}") from None
-    except RecursionError:
-        raise InputError(path, "<nesting>", f"tables and arrays nested deeper than "
-                         f"{MAX_DEPTH} levels") from None
-    check_depth(parsed, str(path))
-    return parsed
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:

@@ -181,7 +181,7 @@ def lanes_per_block_default(backend: str, collision_checks: bool = False,
     accelerator's takes half as many lanes (measured on an H100, a quarter, half and
     all of them: 0.63, 0.59, 0.72 s for 10 000 scenes; benchmarks/RESULTS.md); a CPU's
     keeps all of them (fewer, fuller rounds of the exact search). Stepped users
-    (``shacc_jax.users``): the number of slots the stepping loop keeps busy (measured,
+    (``shacc_jax.stepping``): the number of slots the stepping loop keeps busy (measured,
     54 000 rollouts on 2 CPU cores: 8192 slots 1.94 s, 4096 2.12 s; 10.8 M on an H100:
     2^19 slots 1.62 s, 2^18 1.81 s, 2^20 1.73 s).
 
@@ -209,7 +209,7 @@ class Layout:
     ``collision_checks``: whether the program checks gripper collisions (some scene's
     ``collision`` param is on; scenes with it off are not checked). ``stepped_users``:
     whether some scene's simulated user is not the perfect one (a :data:`USER` param
-    above zero): the program then steps every rollout (``shacc_jax.users``) instead of
+    above zero): the program then steps every rollout (``shacc_jax.stepping``) instead of
     the perfect user's closed form. ``populations``: whether some scene's user settings
     are a population (``user_dist`` above zero): each rollout then draws its own, and the
     rollouts carry the drawn values (``Rollouts.user``). ``swept_checks``: whether some scene checks
@@ -219,7 +219,7 @@ class Layout:
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
     samples (``shacc_jax.lanes``). ``stepping`` (None: the mode's and the backend's,
-    ``shacc_jax.users.FULL_CHECK_SHARE`` and ``STEPPING``): the stepped program's
+    ``shacc_jax.stepping.FULL_CHECK_SHARE`` and ``STEPPING``): the stepped program's
     (share, steps) for every mode, a 1 / share of the slots checked in full per step and
     that many steps per loop iteration; the answers are the same for every value.
     """

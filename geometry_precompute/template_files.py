@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError, shown, unknown_field
+from .fileio import read_toml
 
 BUILTIN_FILE = Path(__file__).with_name("builtin_templates.toml")
 OBJECT_KINDS = ("mug", "cup", "box", "mesh")
@@ -494,7 +495,6 @@ def load_file(path: str | Path, src: str | None = None, fld: str = "templates") 
         >>> t.shape, t.param_names, t.params[1].min.text
         ('cone', ('length', 'half_angle'), 'settings.handle_grasp.half_angle_min')
     """
-    from .scene import read_toml
 
     path = Path(path)
     if not path.is_file():

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from geometry_precompute import load_scene, precompute, random_scene, shipped_scene_paths
-from sweeps.plots import correlation_panels, scene_gallery
-from sweeps.stats import partial_corr_ci, pearson_ci
+from sweeps.analysis.plots import correlation_panels, scene_gallery
+from sweeps.analysis.stats import partial_corr_ci, pearson_ci
 
 if SWEEP:
     import pandas as pd

@@ -29,8 +29,8 @@ from matplotlib.patches import Patch
 
 from geometry_precompute import load_scene, precompute, shipped_scene_paths
 from shacc_jax import OUTCOMES
+from sweeps.analysis.plots import success_fields
 from sweeps.pipeline import evaluate_results
-from sweeps.plots import success_fields
 
 path = SCENE or next(p for p in shipped_scene_paths() if "mug_behind_two" in p.name)
 scene = load_scene(path)

@@ -15,7 +15,7 @@ FIGURES = None  # a folder to save the figure in as scene_gallery.png; None: sho
 from pathlib import Path
 
 from geometry_precompute import load_scene, precompute, shipped_scene_paths
-from sweeps.plots import scene_gallery
+from sweeps.analysis.plots import scene_gallery
 
 paths = shipped_scene_paths() if SCENES is None else [Path(p) for p in SCENES]
 results = [precompute(load_scene(p)) for p in paths]

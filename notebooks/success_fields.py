@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from geometry_precompute import load_scene, precompute, shipped_scene_paths
+from sweeps.analysis.plots import success_fields, success_fields_with_spaces
 from sweeps.pipeline import evaluate_results, optimized_params
-from sweeps.plots import success_fields, success_fields_with_spaces
 
 path = SCENE or next(p for p in shipped_scene_paths() if "mug_behind_two" in p.name)
 scene = load_scene(path)

@@ -36,10 +36,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from sweeps.analysis.plots import sweep_heatmap, sweep_lines, swept_axes
+from sweeps.analysis.stats import paired_diff_ci
 from sweeps.config import load_config
-from sweeps.plots import sweep_heatmap, sweep_lines, swept_axes
-from sweeps.runner import run_sweep
-from sweeps.stats import paired_diff_ci
+from sweeps.distributed.runner import run_sweep
 
 if SWEEP is None:
     tmp = Path(tempfile.mkdtemp())

@@ -31,7 +31,7 @@ from geometry_precompute.schema import PARAMS, lanes_per_block_default
 from . import automaton as am
 from . import collision as col
 from . import lanes as lane_scheduler
-from . import tracking, users
+from . import populations, stepping, tracking
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
 
@@ -270,25 +270,21 @@ def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
 
 def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     """Per mode (Outcome, R, meta steps) of a batch with imperfect simulated users:
-    every rollout stepped (``users.stepped_pass``).
+    every rollout stepped (``stepping.stepped_pass``).
 
     The shrinking and shacc modes move through the same spaces with the same random
     numbers, and the meta skill turns only R: without collision checks (where R moves
     the gripper's capsules) their paths and outcomes are the same, so one pass with the
     meta skill serves both, as the closed form's activation pass does, and the
     shrinking mode keeps the start's R and no meta steps."""
-    lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
-        jax.default_backend(), stepped_users=True)
     modes = layout.modes
     shared = "shrinking" in modes and "shacc" in modes and not layout.collision_checks
     passes = {}
     for mode in modes:
         if mode == "shrinking" and shared:
             continue
-        passes[mode] = users.stepped_pass(
-            geometry, params, "init" if mode == "baseline" else "opt", mode == "shacc",
-            layout.meta_formula, lanes_per_block, layout.swept_checks, jax.default_backend(),
-            layout.collision_checks, layout.stepping, layout.populations)
+        passes[mode] = stepping.stepped_pass(geometry, params, layout, mode,
+                                             jax.default_backend())
     if shared:
         out = passes["shacc"][0]
         S, N, T = out.code.shape
@@ -358,7 +354,7 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         params = Params._make(a.reshape(points * S, *a.shape[2:]) for a in params)
     per_mode = (_stepped if layout.stepped_users else _closed_form)(geometry, params, layout)
     S_all, N = geometry.starts.shape[:2]
-    drawn = (jax.vmap(users.drawn_values)(geometry, params) if layout.populations else
+    drawn = (jax.vmap(populations.drawn_values)(geometry, params) if layout.populations else
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
     per_mode = [jax.vmap(_assemble)(geometry, drawn, *one) for one in per_mode]
     rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)

@@ -1,23 +1,29 @@
-"""The lane scheduler: sequential work over many lanes whose windows differ in length.
+"""The lane schedulers: sequential work over many lanes of different lengths.
 
-A lane is one (scene, start, task) rollout; its window is a run of consecutive
-samples that need sequential work (the meta skill's rate-limited rotation, the
-gripper's collision checks). On random 10-task scenes the windows average 39
-samples with a longest of 198, so a vmapped loop would run every lane to the
-longest, and on a GPU each loop iteration costs kernel launches.
+A lane is one (scene, start, task) rollout. Run as one vmapped loop, every lane would
+take as long as the longest, and on a GPU each loop iteration costs kernel launches;
+the two schedulers here make work proportional to the lanes' own lengths.
 
-:func:`run` sorts the lanes by window length, longest first, and walks them in
-blocks of B lanes x W samples: column c covers samples c W .. c W + W - 1 of each
-window; the lanes still busy in column c are a prefix of the sorted order, so
-column c runs ceil(busy / B) blocks. A caller's ``per_block`` does the work of one block
-at once (a parallel pass over its B x W samples, then a W-step scan). Work is
-proportional to the sum of the windows (rounded up to W), not to the longest
-(measured on CPU: 5x less than one loop over all lanes).
+- :func:`run`, for the closed form's windows: a lane's window is a run of consecutive
+  samples that need sequential work (the meta skill's rate-limited rotation, the
+  gripper's collision checks). On random 10-task scenes the windows average 39
+  samples with a longest of 198. It sorts the lanes by window length, longest first,
+  and walks them in blocks of B lanes x W samples: column c covers samples c W .. c W
+  + W - 1 of each window; the lanes still busy in column c are a prefix of the sorted
+  order, so column c runs ceil(busy / B) blocks. A caller's ``per_block`` does the
+  work of one block at once (a parallel pass over its B x W samples, then a W-step
+  scan). Work is proportional to the sum of the windows (rounded up to W), not to the
+  longest (measured on CPU: 5x less than one loop over all lanes).
+- :func:`run_queue`, for stepped rollouts, whose length is known only when they end:
+  B slots each hold one lane; each iteration steps every slot; a slot whose lane has
+  ended writes its answers and takes the next lane of a queue (the caller's order,
+  longest first, so that the rollouts that run while slots empty are short ones).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -72,3 +78,99 @@ def run(length: Float[Array, " L"], lanes_per_block: int, samples_per_block: int
                                   lambda x: (x[0] + 1, run_column(x[0], x[1])), (0, state))
     inv = jnp.zeros(L, order.dtype).at[order[:L]].set(jnp.arange(L, dtype=order.dtype))
     return jax.tree.map(lambda a: a[inv], state)
+
+
+def first_true(mask: Array, size: int) -> tuple[Array, Array, Array]:
+    """The indices of the first ``size`` true entries of ``mask`` (B,) in order, 0 after
+    them; where each index is to be written back (B + i past their count: dropped); and
+    which entries were taken.
+    A scatter of the entries' positions with unique indices, which the GPU writes in
+    parallel: ``jnp.nonzero`` with a size is a scatter that XLA may not assume unique,
+    61 us a step at 2^19 lanes on an H100, the largest kernel of the loop."""
+    B = mask.shape[0]
+    lane = jnp.arange(B, dtype=jnp.int32)
+    pos = jnp.cumsum(mask, dtype=jnp.int32) - 1
+    taken = mask & (pos < size)
+    idx = jnp.zeros(size, jnp.int32).at[jnp.where(taken, pos, size + lane)].set(
+        lane, mode="drop", unique_indices=True)
+    slots = jnp.arange(size, dtype=jnp.int32)
+    count = jnp.minimum(pos[-1] + 1, size)
+    return idx, jnp.where(slots < count, idx, B + slots), taken
+
+
+def put_at(a: Array, at: Array, v: Array) -> Array:
+    """``a`` with the lanes ``at`` (last axis; out of range: dropped) set to ``v``; the
+    indices are unique (:func:`first_true`)."""
+    return a.at[..., at].set(v, mode="drop", unique_indices=True)
+
+
+class _Queue(NamedTuple):
+    """:func:`run_queue`'s carry: the slots' lanes and states, each slot's lane (-1:
+    empty), the next lane of the queue to start, the answers."""
+
+    lane: Any
+    state: Any
+    slot: Array
+    next: Array
+    result: Any
+
+
+def run_queue(order: Int[Array, " L"], n_real: Int[Array, ""], slots: int, refill_share: int,
+              unroll: int, begin: Callable, step: Callable, finish: Callable, result):
+    """Every lane of the queue ``order`` (the first ``n_real`` entries are run, in that
+    order) through ``slots`` slots; returns ``result`` with every lane's answers.
+
+    ``begin(ids, occupied) -> (lane, state)``: the constants and first states of the
+    lanes ``ids`` (slots on the last axis; ``occupied`` false for empty slots), the
+    state with a boolean ``live``. ``step(state, lane) -> state``: one step of every
+    slot (an ended lane's step must change nothing). ``finish(lane, state) -> rows``:
+    one lane's answers, the leaves of ``result`` (L, ...) less their first axis. Each
+    loop iteration takes ``unroll`` steps, then, once 1 / ``refill_share`` of the
+    slots are free (or none is live), the ended slots write their answers and take
+    the next lanes."""
+    L = jax.tree.leaves(result)[0].shape[0]
+    B = slots
+    R = max(1, B // refill_share)
+
+    def write(result, slot, lane, state, which, valid):
+        """Write the answers of the slots ``which`` (where ``valid``)."""
+        pick = (lambda a: a[..., which])  # noqa: E731
+        done = jax.vmap(finish, in_axes=-1)(jax.tree.map(pick, lane), jax.tree.map(pick, state))
+        at = jnp.where(valid, slot[which], L + jnp.arange(which.shape[0], dtype=jnp.int32))
+        return jax.tree.map(lambda a, v: a.at[at].set(v, mode="drop", unique_indices=True),
+                            result, done)
+
+    def refill(c: _Queue) -> _Queue:
+        """Slots whose rollout has ended write it and take the next lanes of the
+        queue."""
+        state = c.state
+        free = (c.slot >= 0) & ~state.live
+        idx, at, _ = first_true(free, R)
+        n_free = jnp.minimum(jnp.sum(free, dtype=jnp.int32), R)
+        taking = jnp.arange(R, dtype=jnp.int32)
+        result = write(c.result, c.slot, c.lane, state, idx, taking < n_free)
+        n_new = jnp.minimum(n_free, n_real - c.next)
+        new = taking < n_new
+        ids = order[jnp.minimum(c.next + taking, L - 1)]
+        lane_new, state_new = begin(ids, new)
+        put = (lambda a, v: put_at(a, at, v))  # noqa: E731
+        slot = put(c.slot, jnp.where(new, ids, -1))
+        return _Queue(jax.tree.map(put, c.lane, lane_new), jax.tree.map(put, state, state_new),
+                      slot, c.next + n_new, result)
+
+    def body(c: _Queue) -> _Queue:
+        state = c.state
+        for _ in range(unroll):  # steps of ended lanes change nothing
+            state = step(state, c.lane)
+        c = c._replace(state=state)
+        # Refilling touches every lane array: done once enough slots are free (or none
+        # is live), not every step.
+        n_free = jnp.sum((c.slot >= 0) & ~state.live, dtype=jnp.int32)
+        return jax.lax.cond((n_free >= R) | ~jnp.any(state.live), refill, lambda c: c, c)
+
+    first = jnp.arange(B, dtype=jnp.int32)
+    lane, state = begin(order[first], first < n_real)
+    init = _Queue(lane, state, jnp.where(first < n_real, order[first], -1),
+                  jnp.minimum(n_real, B), result)
+    end = jax.lax.while_loop(lambda c: jnp.any(c.state.live) | (c.next < n_real), body, init)
+    return write(end.result, end.slot, end.lane, end.state, first, end.slot >= 0)

@@ -10,8 +10,8 @@ before JAX starts its CPU backend, because the backend reads them once, as it st
   evaluation spreads its scenes.
 
 :func:`configure_runtime` sets both. The entry points call it before anything else
-touches JAX: the console script (``sweeps.launch``), each sweep worker as it starts
-(``sweeps.worker_setup``), the Python API's evaluations (``sweeps.pipeline``, which
+touches JAX: the console script (``sweeps.app.launch``), each sweep worker as it starts
+(``sweeps.distributed.worker_setup``), the Python API's evaluations (``sweeps.pipeline``, which
 the notebooks use), ``shacc_jax.plan`` (so a library user's ``shacc_jax.run`` gets it
 too) and the test suite (``tests/conftest.py``). Called again it does nothing; called
 after JAX has started it can change nothing, and says so once, as a warning, where the

@@ -48,9 +48,10 @@ import numpy as np
 
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
 from geometry_precompute.errors import shown, unknown_field
+from geometry_precompute.fileio import read_toml
 from geometry_precompute.generate import MAX_TASKS
 from geometry_precompute.loading import scene_files
-from geometry_precompute.scene import Scene, read_toml, scene_to_dict
+from geometry_precompute.scene import Scene, scene_to_dict
 from geometry_precompute.settings import INT32_MAX, flatten_settings
 
 _TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}

@@ -13,9 +13,8 @@ import shacc_jax
 from geometry_precompute import BakedScenes, PrecomputeResult
 from geometry_precompute.baking import bake
 from shacc_jax.types import OUTCOMES, Evaluation, Search
-
-from . import compile_cache
-from .output import precompute_json, provenance
+from sweeps import compile_cache
+from sweeps.output import precompute_json, provenance
 
 __all__ = ["Evaluated", "evaluate_results", "scene_json"]
 

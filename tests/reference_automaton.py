@@ -282,7 +282,7 @@ def first_entry(space: Space, a, b, tau: float) -> float | None:
 @dataclass
 class User:
     """A simulated user (the user_* settings) with its random numbers, given as arrays
-    (the kernel's stream: ``shacc_jax.users.user_draws``): per step |N(0, 1)|, the
+    (the kernel's stream: ``shacc_jax.streams.user_draws``): per step |N(0, 1)|, the
     noise axis' angle and the lag's uniform number; once per rollout the tremor's axis
     and phase."""
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from conftest import write_scene
 
 from geometry_precompute import load_scene, shipped_scene_paths
-from sweeps.cli import main
+from sweeps.app.cli import main
 
 SCENE = str(shipped_scene_paths()[8])  # mug-behind-two
 
@@ -75,7 +75,7 @@ def test_bad_input_one_line_no_output(tmp_path):
                       'template = "side_grasp"\n')
     out = tmp_path / "never.json"
     for cmd in (["precompute"], ["evaluate"]):
-        proc = subprocess.run([sys.executable, "-m", "sweeps.cli", *cmd, str(bad),
+        proc = subprocess.run([sys.executable, "-m", "sweeps", *cmd, str(bad),
                                "--json", str(out)], capture_output=True, text=True)
         assert proc.returncode == 2
         err = proc.stderr.strip()
@@ -204,7 +204,7 @@ def test_compilation_cache_is_written_then_reused(tmp_path):
     cache = tmp_path / "jax-cache"
     env = {**__import__("os").environ, "SHACC_COMPILE_CACHE": str(cache),
            "JAX_PLATFORMS": "cpu"}
-    cmd = [sys.executable, "-m", "sweeps.cli", "evaluate", SCENE, "--set", "start_grid=[2,2]"]
+    cmd = [sys.executable, "-m", "sweeps", "evaluate", SCENE, "--set", "start_grid=[2,2]"]
     first = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert first.returncode == 0, first.stderr
     stored = sorted(str(p.relative_to(cache)) for p in cache.rglob("*"))
@@ -222,22 +222,23 @@ def test_compilation_cache_is_written_then_reused(tmp_path):
 
 def test_cli_mode_names_are_the_evaluators():
     import shacc_jax
-    from sweeps import cli
+    from sweeps.app import cli
 
     assert cli.modes() == (shacc_jax.ALL_MODES, shacc_jax.MODES)
 
 
 def test_cli_module_imports_nothing_heavy():
     """`shacc sweep` starts its local cluster's fork server before NumPy, dask and the
-    rest are imported (sweeps.cli.main): importing the command line's module, and the
+    rest are imported (sweeps.app.cli.main): importing the command line's module, and the
     cluster's, or the Ctrl-C handler and the fault reports, imports none of them (of the
     CPU half only the light modules: geometry_precompute loads its names lazily)."""
     heavy = ("numpy", "dask", "distributed", "jax", "pyarrow", "geometry_precompute.scene",
              "geometry_precompute.settings", "geometry_precompute.baking")
     # The parser too: a sweep's fork server starts once its arguments are parsed, before
-    # this process imports NumPy and dask (sweeps.cli._run).
-    code = (f"import sys, sweeps.cli, sweeps.cluster, sweeps.interrupt, sweeps.faults; "
-            f"sweeps.cli.build_parser().parse_args(['sweep', 'c.toml', '--out', 'o']); "
+    # this process imports NumPy and dask (sweeps.app.cli._run).
+    code = (f"import sys, sweeps.app.cli, sweeps.distributed.cluster, "
+            f"sweeps.distributed.interrupt, sweeps.distributed.faults; "
+            f"sweeps.app.cli.build_parser().parse_args(['sweep', 'c.toml', '--out', 'o']); "
             f"print([m for m in {heavy!r} if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -245,7 +246,7 @@ def test_cli_module_imports_nothing_heavy():
 
 
 def test_precompute_command_does_not_import_jax(tmp_path):
-    code = ("import sys; from sweeps.cli import main; "
+    code = ("import sys; from sweeps.app.cli import main; "
             f"main(['precompute', {SCENE!r}]); print('jax' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr

@@ -197,7 +197,7 @@ def test_importing_the_package_starts_no_jax_backend():
     import subprocess
     import sys
 
-    code = ("import sweeps.runner, shacc_jax, shacc_jax.collision\n"
+    code = ("import sweeps.distributed.runner, shacc_jax, shacc_jax.collision\n"
             "from jax._src import xla_bridge\n"
             "assert not xla_bridge._backends, xla_bridge._backends\n")
     subprocess.run([sys.executable, "-c", code], check=True)
@@ -218,7 +218,8 @@ def test_worker_and_scene_modules_import_no_jax_or_collision_library():
     # The sweep's client (runner, cluster, command line) loads no JAX either: only its
     # evaluation workers do.
     code = ("import sys\n"
-            "import geometry_precompute.batch, sweeps.runner, sweeps.cluster, sweeps.cli\n"
+            "import geometry_precompute.batch, sweeps.distributed.runner\n"
+            "import sweeps.distributed.cluster, sweeps.app.cli\n"
             "from geometry_precompute import load_scene\n"
             f"load_scene({str(shipped_scene_paths()[0])!r})\n"
             f"loaded = [m for m in {heavy} if m in sys.modules]\n"

@@ -8,8 +8,8 @@ import json
 import pytest
 
 from geometry_precompute import InputError, shipped_scene_paths
-from sweeps.cli import main
-from sweeps.compare import REGRESSION, compare, parse_fail_if
+from sweeps.analysis.compare import REGRESSION, compare, parse_fail_if
+from sweeps.app.cli import main
 
 SCENES = [str(p) for p in shipped_scene_paths()[2:6]]
 

@@ -17,7 +17,7 @@ import shacc_jax
 from geometry_precompute import DEFAULTS, bake, precompute, random_scene
 from shacc_jax.runplan import bytes_per_rollout, run
 from sweeps.config import parse_config
-from sweeps.runner import run_sweep
+from sweeps.distributed.runner import run_sweep
 
 
 def _run(baked):

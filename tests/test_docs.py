@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from sweeps import reference
+from sweeps.app import reference
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,7 +42,7 @@ def test_no_file_outside_the_tests_names_a_spec_section():
 
 
 def test_generated_reference_tables_are_current():
-    assert reference.main(["--check"]) == 0, "run: python -m sweeps.reference"
+    assert reference.main(["--check"]) == 0, "run: python -m sweeps.app.reference"
 
 
 def test_every_setting_and_column_is_in_the_reference():
@@ -51,7 +51,7 @@ def test_every_setting_and_column_is_in_the_reference():
 
     assert all(f"`{name}`" in settings for name in SPECS)
     outputs = (ROOT / "docs/reference/outputs.md").read_text()
-    from sweeps.tables import COLUMNS
+    from sweeps.analysis.tables import COLUMNS
 
     assert all(f"`{c}`" in outputs for cols in COLUMNS.values() for c in cols)
 
@@ -105,8 +105,8 @@ def _api_members() -> list[str]:
 
 # The public API: each package's ``__all__`` and that of every sweeps module the reference
 # renders (the command-line modules are documented by their --help and the reference).
-API_MODULES = ("shacc_jax", "geometry_precompute", "sweeps.pipeline", "sweeps.runner",
-               "sweeps.stats", "sweeps.plots")
+API_MODULES = ("shacc_jax", "geometry_precompute", "sweeps.pipeline", "sweeps.distributed.runner",
+               "sweeps.analysis.stats", "sweeps.analysis.plots")
 
 
 def _public_api() -> dict[str, object]:

@@ -211,9 +211,9 @@ def test_ctrl_c_while_the_command_line_is_imported():
     """The console script handles Ctrl-C before it imports the command line: a fresh
     install compiles every module on its first import, long enough for a Ctrl-C to land
     there (it did, in CI: a KeyboardInterrupt traceback)."""
-    res = ctrl_c_during_import("name == 'sweeps.cli'",
+    res = ctrl_c_during_import("name == 'sweeps.app.cli'",
                                "sys.meta_path.insert(0, Finder())\n"
-                               "from sweeps.launch import entry\n"
+                               "from sweeps.app.launch import entry\n"
                                "entry()\n")
     assert res.returncode == 130, res.stderr
     assert res.stderr.splitlines() == ["interrupted"], res.stderr
@@ -279,7 +279,7 @@ def test_a_refused_scheduler_is_reported_at_once_and_nothing_is_made(tmp_path):
 
 
 def test_scheduler_probe_is_quick():
-    from sweeps.cluster import check_scheduler
+    from sweeps.distributed.cluster import check_scheduler
 
     t0 = time.perf_counter()
     with pytest.raises(InputError, match="connection refused"):

@@ -28,8 +28,8 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from geometry_precompute.fileio import MAX_DEPTH, MAX_TEXT_BYTES
+from sweeps.app.inputs import parse_sets
 from sweeps.config import load_config, parse_config
-from sweeps.inputs import parse_sets
 
 SCENE = tomllib.loads((shipped_scene_paths()[11]).read_text())  # a box, a mug and a cup
 SCENE["objects"][1]["radius"] = 0.05
@@ -151,7 +151,7 @@ def test_mutated_sweep_config_is_a_config_or_one_line_error(doc):
         one_line_error(e, "sweep.toml")
         return
     assert cfg.points and cfg.chunk >= 1
-    from sweeps.runner import dry_run
+    from sweeps.distributed.runner import dry_run
 
     plan = dry_run(cfg, workers=2)  # accepted: its plan and estimates can be made
     assert plan["points"] == len(cfg.points)

@@ -202,7 +202,7 @@ def test_check_collisions_compares_with_mujoco_and_mjx(tmp_path):
         'position = [0.3, 0.0, 0.0]\n'
         '[[objects]]\nid = "mug"\nkind = "mug"\nposition = [0.15, 0.2, 0.0]\n'
         '[[tasks]]\nid = "t"\nobject = "bowl"\ntemplate = "top_grasp"\n')
-    res = subprocess.run([sys.executable, "-m", "sweeps.cli", "check-collisions", str(scene),
+    res = subprocess.run([sys.executable, "-m", "sweeps", "check-collisions", str(scene),
                           "--poses", "600", "--json"], capture_output=True, text=True,
                          timeout=300)
     assert res.returncode == 0, res.stderr

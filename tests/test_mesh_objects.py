@@ -135,7 +135,7 @@ def test_real_meshes_go_through_every_stage(tmp_path):
     names = [model.geom(i).name for i in range(model.ngeom)]
     meshes = [n for i, n in enumerate(names) if model.geom_type[i] == mujoco.mjtGeom.mjGEOM_MESH]
     assert sorted(meshes) == ["object:body", "object:handle", "object:thumb"]
-    from sweeps.plots import scene_top_view
+    from sweeps.analysis.plots import scene_top_view
 
     scene_top_view(r)
 

@@ -18,7 +18,7 @@ from geometry_precompute import load_scene, precompute
 from geometry_precompute.bodies import object_solid
 from geometry_precompute.errors import SceneWarning
 from geometry_precompute.mjcf import scene_to_mjcf
-from sweeps.cli import main
+from sweeps.app.cli import main
 
 
 def _mapping(scene) -> dict:

@@ -9,7 +9,7 @@ import pytest
 
 from geometry_precompute.bodies import object_body
 from geometry_precompute.mjcf import scene_to_mjcf
-from sweeps.cli import main
+from sweeps.app.cli import main
 
 
 def test_every_shipped_scene_loads(shipped_results):
@@ -70,8 +70,8 @@ def test_render_draws_the_gripper_at_the_end_pose(shipped_results):
     ``orientation``, checked against the NumPy reference in test_automaton)."""
     from scipy.spatial.transform import Rotation
 
+    from sweeps.analysis.render import render_array, rollout_path
     from sweeps.pipeline import evaluate_results
-    from sweeps.render import render_array, rollout_path
 
     r = shipped_results[9]  # three mugs in a cluster: the meta skill turns the gripper
     ev = evaluate_results([r], ("shacc",))
@@ -126,7 +126,7 @@ def test_top_view_labels_every_task_and_none_covers_another(shipped_results):
     import matplotlib.pyplot as plt
     from matplotlib.text import Annotation, Text
 
-    from sweeps.plots import scene_top_view
+    from sweeps.analysis.plots import scene_top_view
 
     for r in (shipped_results[9], shipped_results[2], shipped_results[11]):
         fig, ax = plt.subplots(figsize=(6.4, 4.8))
@@ -159,8 +159,8 @@ def test_render_optimized_mode_draws_its_own_spaces(tmp_path):
     within the template's bounds, and its success is in the title. A short search
     (8 generations) keeps it quick; both runs share one compiled program."""
     from geometry_precompute import load_scene, precompute, shipped_scene_paths
+    from sweeps.analysis.render import optimized_shapes
     from sweeps.pipeline import evaluate_results
-    from sweeps.render import optimized_shapes
 
     scene = shipped_scene_paths()[11]  # cabinet, mug and cup: the search beats Shrinking
     short = {"optimize_generations": 8}

@@ -8,7 +8,7 @@ from __future__ import annotations
 import jupytext
 import pytest
 
-from sweeps.notebook_runner import NOTEBOOKS, execute, main, parameter_names
+from sweeps.app.notebook_runner import NOTEBOOKS, execute, main, parameter_names
 
 NAMES = ["scene_gallery", "success_fields", "clutteredness", "sweep_analysis", "imperfect_users"]
 
@@ -68,7 +68,7 @@ def test_an_unknown_parameter_names_what_the_notebook_has():
     import nbformat
     import pytest
 
-    from sweeps.notebook_runner import inject
+    from sweeps.app.notebook_runner import inject
 
     def notebook(source: str):
         cell = nbformat.v4.new_code_cell(source)

@@ -26,7 +26,7 @@ from shacc_jax import optimize
 from shacc_jax.optimize import cut, objective, optimized_spaces, search, spaces_at
 from shacc_jax.runplan import run, search_scenes_per_call
 from shacc_jax.types import Geometry, Params, SearchProblem
-from sweeps.cli import main
+from sweeps.app.cli import main
 
 SMALL = {"optimize_population": 8, "optimize_generations": 4, "optimize_starts": 16}
 

@@ -21,7 +21,7 @@ from conftest import process_group_members
 
 from geometry_precompute import SPECS, InputError, load_scene, precompute, shipped_scene_paths
 from geometry_precompute.scene import SceneWarning
-from sweeps.cli import main
+from sweeps.app.cli import main
 from sweeps.output import write_atomic
 
 SCENE = str(shipped_scene_paths()[8])
@@ -29,7 +29,7 @@ ROOT = Path(__file__).parents[1]
 
 
 def _shacc(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "sweeps.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "sweeps", *args], capture_output=True,
                           text=True, **kw)
 
 
@@ -120,7 +120,7 @@ def test_sweep_bad_workers_leaves_nothing(tmp_path):
 
 def test_second_sweep_into_a_locked_folder_is_refused(tmp_path):
     from sweeps.config import load_config
-    from sweeps.runner import folder_lock, run_sweep
+    from sweeps.distributed.runner import folder_lock, run_sweep
 
     cfg_path = tmp_path / "s.toml"
     cfg_path.write_text('name = "l"\n[source]\nkind = "random"\ncount = 1\ntasks = [2, 2]\n'
@@ -157,7 +157,7 @@ def test_scene_folder_with_two_start_grids_is_refused_before_any_file(tmp_path):
 
 def test_dry_run_does_not_build_random_scenes():
     from sweeps.config import parse_config
-    from sweeps.runner import dry_run
+    from sweeps.distributed.runner import dry_run
 
     cfg = parse_config({"name": "big", "source": {"kind": "random", "count": 10_000_000}},
                        "<test>", ROOT)
@@ -186,9 +186,9 @@ def test_dry_run_budgets_collision_checks(tmp_path):
     """The per-chunk memory estimate follows the memory model: a point with collision
     checks needs more than the same point without, for random and for file sources."""
     from shacc_jax.runplan import bytes_per_rollout
-    from sweeps.cluster import local_gpus
     from sweeps.config import parse_config
-    from sweeps.runner import dry_run
+    from sweeps.distributed.cluster import local_gpus
+    from sweeps.distributed.runner import dry_run
 
     platform = "gpu" if local_gpus() else "cpu"
     scenes = tmp_path / "scenes"
@@ -217,7 +217,7 @@ def test_generator_range_is_checked(tmp_path):
 def test_ctrl_c_ends_with_one_line_and_no_process_left(tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('name = "c"\n[source]\nkind = "random"\ncount = 400\ntasks = [8, 10]\n')
-    proc = subprocess.Popen([sys.executable, "-m", "sweeps.cli", "sweep", str(cfg), "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "sweeps", "sweep", str(cfg), "--out",
                              str(tmp_path / "o"), "--cache", str(tmp_path / "c"),
                              "--workers", "2"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)

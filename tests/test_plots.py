@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweeps import plots
+from sweeps.analysis import plots
 
 
 @pytest.fixture(autouse=True)

@@ -1,4 +1,4 @@
-"""Populations of simulated users (geometry_precompute.population, shacc_jax.users): the
+"""Populations of simulated users (geometry_precompute.population, shacc_jax.populations): the
 tables and their one-line errors, their JSON Schema, the draws' distributions against
 scipy's, and a sweep over populations whose tables carry the draws."""
 
@@ -19,7 +19,8 @@ from geometry_precompute import DEFAULTS, SPECS, InputError, bake
 from geometry_precompute.file_schema import settings_schema
 from geometry_precompute.population import POPULATED, Population, encode, text_of
 from geometry_precompute.settings import parse_cli_value, population_range
-from shacc_jax import users
+from shacc_jax import streams
+from shacc_jax.populations import population_values
 from shacc_jax.types import Params
 
 BAD = [
@@ -121,9 +122,9 @@ def _draws(kind: str, numbers, name: str, n: int = 4000) -> np.ndarray:
     x = Params._make(jnp.zeros(()) for _ in Params._fields)._replace(
         user_dist=jnp.asarray(dist), user_dist_args=jnp.asarray(a),
         user_dist_values=jnp.asarray(v))
-    keys = jax.vmap(lambda k: users.rollout_key(jnp.int32(0), jnp.int32(77), jnp.int32(1), k))(
-        jnp.arange(n, dtype=jnp.int32))
-    return np.asarray(jax.vmap(lambda k: users.population_values(k, x, jnp.float32))(keys))[:, i]
+    keys = jax.vmap(lambda k: streams.rollout_key(jnp.int32(0), jnp.int32(77), jnp.int32(1),
+                                                  k))(jnp.arange(n, dtype=jnp.int32))
+    return np.asarray(jax.vmap(lambda k: population_values(k, x, jnp.float32))(keys))[:, i]
 
 
 def test_draws_follow_their_distributions():
@@ -153,7 +154,7 @@ def test_a_population_sweep_records_each_rollouts_user(tmp_path):
     value where a point has none, a draw in the population's support where it has),
     the same draws in every mode, read alike by pyarrow and pandas."""
     from sweeps.config import parse_config
-    from sweeps.runner import run_sweep
+    from sweeps.distributed.runner import run_sweep
 
     cfg = parse_config({
         "name": "population", "modes": ["baseline", "shacc"], "chunk": 2,

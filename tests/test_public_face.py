@@ -49,7 +49,8 @@ def private_uses(source: str) -> list[str]:
 
 
 def test_the_check_finds_private_names():
-    assert private_uses("from sweeps.cli import _local_sweep") == ["sweeps.cli._local_sweep"]
+    assert private_uses("from sweeps.app.cli import _local_sweep") == \
+        ["sweeps.app.cli._local_sweep"]
     assert private_uses("import shacc_jax.collision as col\ncol._x(1)") == ["col._x"]
     assert private_uses("from sweeps import tables\ntables._numbers") == ["tables._numbers"]
     assert private_uses("import numpy as np\nnp._x\nfrom sweeps import cli\ncli.main") == []

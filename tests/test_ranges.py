@@ -249,7 +249,7 @@ def test_evaluate_plan_prints_the_plan_and_evaluates_nothing(monkeypatch, capsys
     """``shacc evaluate --plan``: the RunPlan for the batch, with the pieces the budget
     allows; no evaluation runs."""
     from shacc_jax import runplan
-    from sweeps.cli import main
+    from sweeps.app.cli import main
 
     def refuse(*args, **kwargs):
         raise AssertionError("evaluated")

@@ -15,10 +15,10 @@ import pandas as pd
 import pytest
 
 from geometry_precompute import InputError, shipped_scene_paths
-from sweeps.cli import main
+from sweeps.analysis.report import evaluate_report, sweep_report
+from sweeps.app.cli import main
 from sweeps.config import load_config
-from sweeps.report import evaluate_report, sweep_report
-from sweeps.runner import run_sweep
+from sweeps.distributed.runner import run_sweep
 
 CONFIG = """
 name = "report"

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from sweeps.cli import main
-from sweeps.reproduce import CATEGORIES, README_BEGIN, README_END
+from sweeps.app.cli import main
+from sweeps.app.reproduce_cmd import CATEGORIES, README_BEGIN, README_END
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_robustness_section(quick_run):
     """Every user parameter at the perfect level and its quick level, in every mode, with
     scene-level CIs and paired differences to the baseline; the verdict follows from
     the rows by its rule; the report and the figure show them."""
-    from sweeps import robustness
+    from sweeps.analysis import robustness
 
     out, _ = quick_run
     s = json.loads((out / "summary.json").read_text())
@@ -131,7 +131,7 @@ def _row(level, diff, ci):
     ([(0.0, [-0.1, 0.1]), (0.1, [0.05, 0.2])], "none"),
 ])
 def test_verdict_rule(diffs, expected):
-    from sweeps.robustness import verdict
+    from sweeps.analysis.robustness import verdict
 
     rows = [_row(i, d, ci) for i, (d, ci) in enumerate(diffs)]
     assert verdict(rows, "shacc") == expected

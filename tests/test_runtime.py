@@ -31,7 +31,7 @@ def _run(code: str, **env) -> dict:
 def test_importing_the_packages_changes_nothing():
     got = _run("import os, json, jax\n"
                "before = dict(os.environ), jax.config.jax_num_cpu_devices\n"
-               "import shacc_jax, geometry_precompute, sweeps, sweeps.cli, sweeps.pipeline\n"
+               "import shacc_jax, geometry_precompute, sweeps, sweeps.app.cli, sweeps.pipeline\n"
                "import geometry_precompute.baking, geometry_precompute.precomputing\n"
                "after = dict(os.environ), jax.config.jax_num_cpu_devices\n"
                "from jax._src import xla_bridge\n"

@@ -16,10 +16,10 @@ from geometry_precompute import shipped_scene_paths
 from geometry_precompute.errors import InputError
 from geometry_precompute.file_schema import LOADER_ONLY, scene_schema
 from geometry_precompute.loading import scene_from_dict
-from sweeps.cli import main
+from sweeps.app.cli import main
+from sweeps.app.schema_cmd import LOADER_ONLY as SWEEP_LOADER_ONLY
+from sweeps.app.schema_cmd import sweep_schema
 from sweeps.config import parse_config
-from sweeps.schema_cmd import LOADER_ONLY as SWEEP_LOADER_ONLY
-from sweeps.schema_cmd import sweep_schema
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = jsonschema.Draft202012Validator(scene_schema())

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sweeps.stats import mean_ci, pearson_ci
+from sweeps.analysis.stats import mean_ci, pearson_ci
 
 
 def test_pearson_matches_scipy_and_bootstrap():
@@ -67,7 +67,7 @@ def test_scene_level_intervals_cover_and_pooled_rows_do_not():
     mean over the other axis at each level of one axis, with scenes resampled as
     clusters, covers the true mean in 93-97 % of them; pooling the rows as if they were
     independent scenes does not (it is too narrow)."""
-    from sweeps.stats import group_means, pooled_rows_ci
+    from sweeps.analysis.stats import group_means, pooled_rows_ci
 
     rng = np.random.default_rng(11)
     hits, pooled_hits, trials = 0, 0, 0
@@ -87,7 +87,7 @@ def test_scene_level_intervals_cover_and_pooled_rows_do_not():
 
 
 def test_group_means_refuse_to_pool_repeated_scenes():
-    from sweeps.stats import group_means
+    from sweeps.analysis.stats import group_means
 
     df, _ = _sweep(np.random.default_rng(0), n_scenes=5)
     with pytest.raises(ValueError, match="repeat scenes"):
@@ -97,7 +97,7 @@ def test_group_means_refuse_to_pool_repeated_scenes():
 
 
 def test_paired_intervals_are_narrower_on_correlated_scenes():
-    from sweeps.stats import paired_diff_ci, relative_change_ci
+    from sweeps.analysis.stats import paired_diff_ci, relative_change_ci
 
     rng = np.random.default_rng(5)
     a = rng.uniform(0.2, 0.8, 50)
@@ -116,7 +116,7 @@ def test_paired_intervals_are_narrower_on_correlated_scenes():
 def test_partial_correlation_against_regression_residuals():
     """The partial correlation of x and y given z equals the correlation of their
     residuals after regressing each on z; a confounded correlation falls towards zero."""
-    from sweeps.stats import partial_corr_ci
+    from sweeps.analysis.stats import partial_corr_ci
 
     rng = np.random.default_rng(8)
     z = rng.integers(5, 11, 200).astype(float)  # a task count

@@ -20,7 +20,7 @@ from conftest import StartedCluster, process_group_members
 
 from geometry_precompute import InputError, bake, precompute, random_scene
 from sweeps.config import load_config, parse_config
-from sweeps.runner import dry_run, run_sweep
+from sweeps.distributed.runner import dry_run, run_sweep
 
 CONFIG = """
 name = "tiny"
@@ -138,7 +138,7 @@ def test_the_dataset_reads_the_same_typed_everywhere(finished):
     import pyarrow.dataset as ds
     import pyarrow.parquet as pq
 
-    from sweeps.tables import COLUMNS, TABLES
+    from sweeps.analysis.tables import COLUMNS, TABLES
 
     _, out, _, _ = finished
     con = duckdb.connect()
@@ -213,7 +213,7 @@ def test_dry_run_counts(finished):
 
 
 def test_points_group_by_everything_but_rollout_settings(tmp_path):
-    from sweeps.plan import point_groups
+    from sweeps.distributed.plan import point_groups
 
     cfg = load_config(write(tmp_path, CONFIG + "[[points]]\nshrink_step = 0.9\n"
                             "[[points]]\ngripper.opening = 0.12\n"))
@@ -225,7 +225,7 @@ def test_points_group_by_everything_but_rollout_settings(tmp_path):
 
 
 def _sweep_cmd(config: Path, out: Path, cache: Path) -> list[str]:
-    return [sys.executable, "-m", "sweeps.cli", "sweep", str(config), "--out", str(out),
+    return [sys.executable, "-m", "sweeps", "sweep", str(config), "--out", str(out),
             "--cache", str(cache), "--workers", "1", "--quiet"]
 
 
@@ -434,7 +434,7 @@ def test_missing_kind_of_worker_is_said_and_the_sweep_goes_on_when_one_joins(
     """A cluster started apart loses its only evaluation worker (and its nanny) as the
     sweep starts: the command says, in one line, that no worker has the 'evaluate'
     resource, waits, and finishes when a new one joins; the tables are whole."""
-    from sweeps import cluster
+    from sweeps.distributed import cluster
 
     monkeypatch.setattr(cluster, "NO_WORKER_PATIENCE", 1.0)
     monkeypatch.setattr(cluster, "NO_WORKER_CHECK", 0.2)
@@ -492,7 +492,7 @@ def test_sweep_over_collision_and_gripper_sizes(tmp_path):
     share one geometry (rollout settings only), so one group and one evaluation per
     chunk; without checks nothing collides, with them both grips collide and the
     opening changes how often."""
-    from sweeps.plan import point_groups
+    from sweeps.distributed.plan import point_groups
 
     text = CONFIG.replace("v_max = [0.15, 0.3]\nstart_grid = [[2, 2]]",
                           'collision = ["off", "on"]\ngripper.opening = [0.04, 0.14]\n'
@@ -544,7 +544,7 @@ def test_random_source_presets(tmp_path):
 def test_compare_two_sweep_folders(finished):
     """A sweep compared with itself: a row per point, mode and metric, every difference
     zero (the same scenes and points, read from the typed tables)."""
-    from sweeps.compare import compare
+    from sweeps.analysis.compare import compare
 
     _, out, _, _ = finished
     result = compare(out, out, n_boot=200)

@@ -15,9 +15,9 @@ import pytest
 from test_sweep import CONFIG, write
 
 from geometry_precompute import InputError, bake, precompute, random_scene
-from sweeps import evaluation_worker
 from sweeps.config import load_config, parse_config
-from sweeps.plan import bucket, plan, shapes
+from sweeps.distributed import evaluation_worker
+from sweeps.distributed.plan import bucket, plan, shapes
 
 
 def test_buckets():
@@ -32,7 +32,7 @@ def test_precompute_batches_cover_the_chunk_in_order():
     """Every scene of a chunk in exactly one precompute task, in order; at most 64 a
     task, at most two tasks per worker thread (unless that cap needs more), and at least
     one per thread where the chunk has the scenes."""
-    from sweeps.plan import precompute_batches
+    from sweeps.distributed.plan import precompute_batches
 
     for n, workers in [(1000, 16), (1000, 30), (1000, 4), (3, 2), (7, 1), (64, 64)]:
         parts = precompute_batches(range(100, 100 + n), workers)
@@ -126,7 +126,7 @@ def test_client_memory_does_not_grow_with_the_number_of_chunks(started_cluster, 
 import json, sys, tracemalloc
 from pathlib import Path
 from sweeps.config import load_config
-from sweeps.runner import run_sweep
+from sweeps.distributed.runner import run_sweep
 cfg, out = load_config(sys.argv[1]), Path(sys.argv[2])
 tracemalloc.start()
 run_sweep(cfg, out, out.parent / "cache", progress=False, scheduler=sys.argv[3],
@@ -156,8 +156,8 @@ def test_an_early_warm_up_serves_the_task_of_its_job_only(tmp_path):
     error."""
     from dataclasses import replace
 
-    from sweeps.evaluation_worker import EarlyWarmUp, warm_up
-    from sweeps.runner import warm_up_job
+    from sweeps.distributed.evaluation_worker import EarlyWarmUp, warm_up
+    from sweeps.distributed.runner import warm_up_job
 
     cfg = load_config(write(tmp_path, CONFIG))
     job, ref = warm_up_job(cfg, plan(cfg), None)
@@ -181,8 +181,8 @@ def test_local_workers_are_forked_from_one_server_and_set_up_by_the_plugin(tmp_p
     with it)."""
     import signal
 
-    from sweeps.cluster import connect
-    from sweeps.runner import warm_up_job
+    from sweeps.distributed.cluster import connect
+    from sweeps.distributed.runner import warm_up_job
 
     def probe():
         return (os.getppid(), "geometry_precompute.batch" in sys.modules,
@@ -213,7 +213,7 @@ def test_local_dashboard_is_built_when_first_opened():
     do its other pages; distributed's own routes answer before that."""
     import urllib.request
 
-    from sweeps.cluster import connect
+    from sweeps.distributed.cluster import connect
 
     def bokeh_apps(pool) -> int:
         return pool.client.run_on_scheduler(lambda dask_scheduler: sum(
@@ -236,7 +236,7 @@ def test_no_fork_server_means_spawned_workers(monkeypatch):
 
     import dask
 
-    from sweeps.cluster import start_fork_server
+    from sweeps.distributed.cluster import start_fork_server
 
     def refuse():
         raise OSError("no unix sockets here")
@@ -252,7 +252,7 @@ def test_a_chunk_evaluates_the_same_however_its_precompute_was_split(tmp_path):
     in the chunk's order, padded to the chunk's shape; its evaluation, trimmed back to
     the chunk's scenes, does not depend on how the scenes were split into batches."""
     from geometry_precompute.batch import precompute_batch
-    from sweeps.evaluation_worker import ChunkJob, evaluate_chunk, join_chunk
+    from sweeps.distributed.evaluation_worker import ChunkJob, evaluate_chunk, join_chunk
 
     cfg = parse_config({"name": "j", "chunk": 9, "source": {
         "kind": "random", "count": 9, "tasks": [3, 4], "seed": 1}}, "<test>", str(tmp_path))
@@ -288,7 +288,7 @@ def test_the_worker_watch_never_holds_the_command_when_the_scheduler_is_gone(mon
     import time
     from types import SimpleNamespace
 
-    from sweeps import cluster
+    from sweeps.distributed import cluster
 
     monkeypatch.setattr(cluster, "NO_WORKER_CHECK", 0.01)
     asked, release = threading.Event(), threading.Event()

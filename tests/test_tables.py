@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from sweeps import tables
+from sweeps.analysis import tables
 
 DTYPES = [np.int8, np.int16, np.int32, np.int64, np.uint8, np.float32, np.float64]
 
@@ -56,7 +56,7 @@ def test_a_chunks_tables_import_no_pandas():
         import sys
         from types import SimpleNamespace
         import numpy as np
-        from sweeps import tables
+        from sweeps.analysis import tables
         S, M, N, T = 4, 3, 2, 3
         rng = np.random.default_rng(0)
         ro = SimpleNamespace(outcome=rng.integers(-1, 5, (S, M, N, T)).astype(np.int8),

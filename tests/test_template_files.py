@@ -131,8 +131,8 @@ def test_a_template_written_as_data_end_to_end(tmp_path):
 
     from geometry_precompute.cache import scene_key
     from geometry_precompute.mjcf import scene_to_mjcf
+    from sweeps.analysis.render import optimized_shapes, render_array, top_view_array
     from sweeps.pipeline import evaluate_results
-    from sweeps.render import optimized_shapes, render_array, top_view_array
 
     path = _scene(tmp_path)
     scene = load_scene(path)
@@ -164,7 +164,7 @@ def test_a_template_written_as_data_end_to_end(tmp_path):
 
 def test_templates_lists_builtin_file_and_scene_tasks(tmp_path):
     path = _scene(tmp_path)
-    r = subprocess.run([sys.executable, "-m", "sweeps.cli", "templates", str(path), "--json"],
+    r = subprocess.run([sys.executable, "-m", "sweeps", "templates", str(path), "--json"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
@@ -176,7 +176,7 @@ def test_templates_lists_builtin_file_and_scene_tasks(tmp_path):
     tasks = {t["task"]: t for t in out["tasks"]}
     assert tasks["side"]["bounds"]["radius"] == pytest.approx([0.095, 0.2])
     assert tasks["place"]["bounds"]["height"] == [0.04, 0.2]
-    r = subprocess.run([sys.executable, "-m", "sweeps.cli", "templates", "--file",
+    r = subprocess.run([sys.executable, "-m", "sweeps", "templates", "--file",
                         str(KITCHEN_TEMPLATES)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and "angled_top" in r.stdout and "shrinks half_angle [rad]" \
         in r.stdout, r.stderr

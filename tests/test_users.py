@@ -1,4 +1,5 @@
-"""Simulated users beyond the perfect one (shacc_jax.users): the stepped kernel against
+"""Simulated users beyond the perfect one (shacc_jax.stepping and its parts): the stepped
+kernel against
 the NumPy Automaton driven by the same random numbers, the perfect user stepped against
 the closed form, the random numbers' distributions and their independence of the
 batch, the mode and the device split."""
@@ -24,7 +25,8 @@ from geometry_precompute import (
     precompute,
     shipped_scene_paths,
 )
-from shacc_jax import runplan, users
+from geometry_precompute.population import POPULATED
+from shacc_jax import runplan, stepping, streams, user_models
 
 # A population: each rollout draws its own user (the reference is given the values the
 # kernel reports it drew).
@@ -99,7 +101,7 @@ def test_the_perfect_user_stepped_is_the_closed_form(scenes):
 @partial(jax.jit, static_argnums=(2, 3, 4))
 def _draw_all(seed, scene_key, N: int, T: int, n_steps: int):
     # One program for every scene and case (seed and scene key are arguments).
-    return jax.vmap(jax.vmap(lambda n, t: users.user_draws(seed, scene_key, t, n, n_steps,
+    return jax.vmap(jax.vmap(lambda n, t: streams.user_draws(seed, scene_key, t, n, n_steps,
                                                            np.float64), (None, 0)), (0, None))(
         jnp.arange(N, dtype=jnp.int32), jnp.arange(T, dtype=jnp.int32))
 
@@ -137,7 +139,7 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
                         assert (drawn == drawn[0]).all()  # one user in every mode
                         values = [float(v) for v in drawn[0]]
                     else:
-                        values = [overrides.get(k, 0.0) for k in users.POPULATED]
+                        values = [overrides.get(k, 0.0) for k in POPULATED]
                     user = User(*values,
                                 (steps.noise[n, t], steps.axis_angle[n, t], steps.lag[n, t]),
                                 once.tremor_axis[n, t], float(once.tremor_phase[n, t]),
@@ -167,7 +169,7 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
 
 def test_the_accelerators_stepping_gives_the_same_rollouts(scenes):
     """The accelerators step differently (several steps per loop iteration,
-    users.STEPPING); run here on the CPU (Layout.stepping), with every lane checked in
+    stepping.STEPPING); run here on the CPU (Layout.stepping), with every lane checked in
     full each step, their rollouts equal the CPU's scheme (a share of lanes gathered and
     checked, one step per iteration) bit for bit, in every mode, on a batch that mixes
     perfect users with imperfect ones (the schemes differ in the loop, not in a step's
@@ -177,8 +179,8 @@ def test_the_accelerators_stepping_gives_the_same_rollouts(scenes):
                   for r, o in zip(scenes, users_per_scene, strict=True)])
     ours = _evaluate(baked, stepped_users=True, lanes_per_block=40)
     theirs = _evaluate(baked, stepped_users=True, lanes_per_block=40,
-                       stepping=(1, users.STEPPING["accelerator"]))
-    assert users.STEPPING["accelerator"] != users.STEPPING["cpu"]
+                       stepping=(1, stepping.STEPPING["accelerator"]))
+    assert stepping.STEPPING["accelerator"] != stepping.STEPPING["cpu"]
     for field in ours.rollouts._fields:
         a, b = getattr(ours.rollouts, field), getattr(theirs.rollouts, field)
         assert np.array_equal(a, b, equal_nan=True), field
@@ -214,11 +216,11 @@ def test_noise_angles_follow_their_distribution():
     """The angle between a direction and its noisy version is |N(0, sigma^2)| and the
     axis it turns about is uniform on the circle across it (Kolmogorov-Smirnov), from
     the kernel's own random numbers and turning function."""
-    steps, _ = users.user_draws(0, 12345, 2, 7, n_steps=4000)
+    steps, _ = streams.user_draws(0, 12345, 2, 7, n_steps=4000)
     sigma = 0.3
     u = np.array([0.3, -0.5, 0.81])
     u /= np.linalg.norm(u)
-    turned = np.asarray(jax.vmap(lambda a, psi: users.turn_across(
+    turned = np.asarray(jax.vmap(lambda a, psi: user_models.turn_across(
         np.asarray(u, np.float32), sigma * a, psi))(steps.noise, steps.axis_angle))
     angle = np.arccos(np.clip(turned @ u, -1, 1))
     assert stats.kstest(angle, stats.halfnorm(scale=sigma).cdf).pvalue > 1e-3
@@ -242,7 +244,7 @@ def test_step_draws_are_jax_threefry():
     k = jnp.asarray(rng.integers(0, 2**31, 4000), jnp.int32)
 
     def theirs(seed, k):
-        key = users.rollout_key(*seed)
+        key = streams.rollout_key(*seed)
         step_key = jax.random.key_data(jax.random.fold_in(key, 1))
         kk = k.astype(jnp.uint32)
         words = threefry_2x32(step_key, jnp.stack([kk, kk, jnp.zeros_like(kk),
@@ -251,7 +253,7 @@ def test_step_draws_are_jax_threefry():
         return (jnp.sqrt(2.0) * jax.scipy.special.erfinv(u[0]), 2.0 * jnp.pi * u[1], u[2])
 
     def ours(seed, k):
-        return tuple(users.step_draws(users.rollout_key(*seed), k, jnp.float32))
+        return tuple(streams.step_draws(streams.rollout_key(*seed), k, jnp.float32))
 
     seeds = jnp.asarray(seeds)
     for a, b in zip(jax.vmap(ours)(seeds, k), jax.vmap(theirs)(seeds, k), strict=True):
@@ -262,7 +264,7 @@ def test_lag_repeats_a_step_with_its_probability():
     """Over many steps and rollouts a step lags (its uniform number below user_lag)
     with probability user_lag (binomial test), and the tremor axes are uniform on the
     sphere (their z uniform in [-1, 1])."""
-    draw = jax.vmap(lambda start: users.user_draws(3, 99, 0, start, n_steps=200))
+    draw = jax.vmap(lambda start: streams.user_draws(3, 99, 0, start, n_steps=200))
     steps, once = draw(np.arange(100, dtype=np.int32))
     lag = np.asarray(steps.lag)
     for p in (0.05, 0.2, 0.5):

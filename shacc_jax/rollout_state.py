@@ -1,0 +1,88 @@
+"""What a stepped rollout carries: its constants (:class:`Lane`), its state
+(:class:`State`), a step's move before its check (:class:`Move`) and a full check's
+answers (:class:`Check`). The parts of a step (``user_models``, ``activation``,
+``assistance``) read and make these; the scheduler (``lanes.run_queue``) moves them
+between slots. Per-lane arrays keep the lane axis last."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from jaxtyping import Array
+
+from .streams import RolloutDraws
+from .types import Params
+from .vec3 import V3
+
+
+class Lane(NamedTuple):
+    """A lane's constants: its scene, task and settings, the start pose, the random
+    numbers drawn once, its task's space (kind, centre, quaternion, dims, the cone's
+    trigonometry: the rotation matrix is made where used, which reads fewer numbers a
+    step than a stored one; the trigonometry costs more to recompute on a CPU) and aim
+    point, the perfect user's path (closest point, direction, length; the rest of
+    ``automaton.Path`` is p0 and numbers of the settings). Every step reads them all:
+    the move is bound by memory, so nothing is stored twice."""
+
+    scene: Array
+    target: Array
+    x: Params
+    p0: Array
+    r0: Array
+    real: Array
+    perfect: Array
+    step_key: Array
+    once: RolloutDraws
+    own: tuple[Array, Array, Array, Array, Array]
+    aim: Array
+    c0: Array
+    u: Array
+    length: Array
+
+
+class Move(NamedTuple):
+    """A step's move, before its check: the step count, the commanded and gripper
+    positions, the displacement, the path length, the gripper's path since the last
+    full check."""
+
+    k: Array
+    q: V3
+    p: V3
+    delta: V3
+    travelled: Array
+    moved: Array
+
+
+class Check(NamedTuple):
+    """A full check's answers at the gripper: its position (the entry point under the
+    swept check), the path length, ended (activated or collided), the outcome code and
+    activated task should it have ended (``automaton.outcome_codes``; a collision's
+    code and -1), R after the meta skill's turn, whether the step counts as a meta
+    step, the clearance."""
+
+    p: Array
+    travelled: Array
+    done: Array
+    code: Array
+    activated: Array
+    r: Array
+    counted: Array
+    clear: Array
+
+
+class State(NamedTuple):
+    """A lane's dynamic state, what each step changes."""
+
+    k: Array          # steps taken
+    q: V3             # commanded position
+    p: V3             # gripper position
+    last: V3          # the previous step's displacement
+    r: Array          # orientation (4,)
+    meta_steps: Array
+    travelled: Array  # path length of the commanded position, m
+    done: Array       # activated or collided
+    code: Array       # the outcome code where done (a check's answer, not the T sdfs:
+    activated: Array  # writing those back was a tenth of a step's time on a GPU)
+    clear: Array      # the clearance found at the last full check
+    moved: Array      # the gripper's path since, m
+    live: Array       # still stepping

@@ -1,0 +1,250 @@
+"""The stepping engine: every rollout of one mode stepped, for imperfect users.
+
+A step composes named parts, each in its own module: the user's command
+(``user_models``: where the user looks, what it commands, where the gripper ends up),
+the activation check (``activation``: sdfs, the activated task, collisions) and the
+assistance (``assistance``: today the meta skill's turn of R), all on one lane's
+constants and state (``rollout_state``) with the rollout's random numbers
+(``streams``, ``populations``). The scheduler (``lanes.run_queue``) runs the lanes
+through a block of slots, refilling a slot from a queue when its rollout ends.
+
+Per step, every live lane moves; the lanes whose clearance allows it skip the check
+(``activation``), and at most 1 / share of the slots are gathered and checked in full.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool
+
+from geometry_precompute.schema import lanes_per_block_default
+
+from . import automaton as am
+from . import collision as col
+from . import lanes as scheduler
+from . import shapes
+from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
+from .assistance import prepare
+from .populations import with_population
+from .rollout_state import Lane, State
+from .streams import rollout_draws, rollout_key, step_key
+from .types import Geometry, Layout, Params
+from .user_models import aim, is_perfect, move, shake
+from .vec3 import of
+
+# A block checks in full at most a 1 / share of its lanes per step (1: all, without
+# gathering the others out); a lane that needs a full check and finds no place waits a
+# step (its rollout is unchanged by waiting). The mode with the meta skill needs a full
+# check on about 40 % of its live steps (inside a meta region R turns every step), the
+# others on about 8 %.
+FULL_CHECK_SHARE = {"meta": 4, "other": 8}
+# A refill gives at most this share of the slots new lanes; it waits until that many
+# are free (or none is live).
+REFILL_SHARE = 4
+# Per backend, the steps per loop iteration (each iteration costs a device-to-host
+# round trip for its condition on an accelerator). Measured on an H100, 10.8 M
+# rollouts, 2^19 slots (benchmarks/RESULTS.md): with 4 steps an iteration and a share of
+# 4 for every mode, shares 1, 4 and 8 took 2.30, 1.62 and 1.95 s; after the kernel's
+# memory traffic was cut, 8 steps an iteration took 1.035 s against 1.126 s for 4 (55
+# s to compile against 31 s); with the shares above and refills of a quarter of the
+# slots (were a sixteenth), 0.971 s.
+STEPPING = {"cpu": 1, "accelerator": 8}
+
+
+def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, which: str,
+               populations: bool, scene: Array, start: Array, target: Array) -> Lane:
+    """One lane's constants (vmapped over a block); with ``populations``, its drawn user
+    settings."""
+    pick = (lambda a: a[scene])  # noqa: E731
+    g, x, sp = (jax.tree.map(pick, t) for t in (geometry, params, spaces))
+    dtype = geometry.starts.dtype
+    pose = g.starts[start]
+    key = rollout_key(x.user_seed, g.scene_key, target, g.start_index[start])
+    if populations:
+        x = with_population(key, x, dtype)
+    # Drawn (or plain): the distributions are not carried in the lane's state.
+    x = x._replace(user_dist=jnp.zeros((), jnp.int32), user_dist_args=jnp.zeros((), dtype),
+                   user_dist_values=jnp.zeros((), dtype))
+    n = am.rollout_numbers(x, dtype)
+    own = (g.kind[target], getattr(g, f"center_{which}")[target],
+           getattr(g, f"quat_{which}")[target], getattr(g, f"dims_{which}")[target],
+           sp.trig[target])
+    path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
+    return Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
+                step_key(key), rollout_draws(key, dtype), own, g.aim_point[target],
+                path.c0, path.u, path.length)
+
+
+def _once(tree, token: Bool[Array, ""]):
+    """``tree`` as it is, computed once: ``token`` must be true at run time, unknown to
+    XLA, and not batched. XLA's CPU backend fuses a value into each fusion that reads
+    it, so a value read by several (a point's three components, the sdfs that decide
+    activation, clearance and the meta weights) is computed in each, and it removes
+    ``jax.lax.optimization_barrier`` before fusion. A conditional's results are
+    buffers, so the value is computed once, before the branch. Measured on 2 CPU cores,
+    50 scenes (benchmarks/RESULTS.md): the shacc mode's stepped pass 0.805 s to 0.665 s
+    with the sdfs computed once. Not for accelerators, where a conditional waits for
+    its predicate on the host."""
+    return jax.lax.cond(token, lambda t: t, lambda t: jax.tree.map(jnp.zeros_like, t), tree)
+
+
+class Result(NamedTuple):
+    """Every lane's answers, (L, ...) in lane order, written as lanes end."""
+
+    code: Array
+    activated: Array
+    step: Array
+    point: Array
+    path_length: Array
+    r: Array
+    meta_steps: Array
+
+
+def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
+                 backend: str = "cpu") -> tuple[am.Outcome, Array, Array]:
+    """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
+    T, 4) and the meta steps (S, N, T). The mode decides the spaces (the baseline's
+    initial ones, the others' optimised ones) and the assistance (the meta skill in the
+    shacc mode); the layout the checks, the slots and the scheme of the loop.
+
+    One loop of steps over ``layout.lanes_per_block`` slots, each holding one rollout
+    (a lane: scene, start, task). Each step moves every live lane
+    (``user_models.move``); the lanes whose clearance allows it skip the check, and at
+    most a 1 / share of the slots are gathered and checked in full
+    (``activation.check``; the share and the steps per loop iteration are
+    ``layout.stepping``, or the mode's :data:`FULL_CHECK_SHARE` and the backend's
+    :data:`STEPPING`; with ``layout.populations`` the lanes draw their user settings,
+    ``populations.with_population``). A slot whose rollout has ended (an activation,
+    a collision or max_steps) writes its answers and takes the next lane of the queue
+    (``lanes.run_queue``). The queue holds the real lanes sorted by the perfect user's
+    landing step, longest first, so that the last rollouts, which run while slots
+    empty, are short ones; padded tasks are not run."""
+    which = "init" if mode == "baseline" else "opt"
+    track = mode == "shacc"  # the meta weights reuse the check's sdfs of "opt"
+    lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
+        backend, stepped_users=True)
+    S, N, T = geometry.starts.shape[0], geometry.starts.shape[1], geometry.task_mask.shape[1]
+    L = S * N * T
+    dtype = geometry.starts.dtype
+    spaces = jax.vmap(lambda g: g.spaces(which))(geometry)
+    meta = prepare(geometry) if track else None
+    scene = jnp.repeat(jnp.arange(S, dtype=jnp.int32), N * T)
+    start = jnp.tile(jnp.repeat(jnp.arange(N, dtype=jnp.int32), T), S)
+    task = jnp.tile(jnp.arange(T, dtype=jnp.int32), S * N)
+    # Per-lane arrays keep the lane axis last ((3, B), (T, B)): the per-lane code's
+    # small vectors are then rows of whole arrays, which XLA vectorises across lanes.
+    # The hulls are read where the gripper is near a mesh, not gathered for every lane.
+    per_lane = geometry._replace(obj_hull=None, obj_hull_plane=None)  # type: ignore[arg-type]
+    make = jax.vmap(partial(_make_lane, per_lane, params, spaces, which, layout.populations),
+                    out_axes=-1)
+    lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
+
+    def landing(s, n, t):
+        x = am.rollout_numbers(jax.tree.map(lambda a: a[s], params), dtype)
+        path = am.straight_path(jax.tree.map(lambda a: a[s], spaces), t,
+                                geometry.starts[s, n, :3], x["step_length"], x["max_steps"])
+        return jnp.where(geometry.task_mask[s, t], path.landing, -1.0)
+
+    order = jnp.argsort(-jax.vmap(landing)(scene, start, task)).astype(jnp.int32)
+    n_real = (jnp.sum(geometry.task_mask) * N).astype(jnp.int32)
+    B = min(lanes_per_block, L)
+    share, unroll = layout.stepping or (FULL_CHECK_SHARE["meta" if track else "other"],
+                                        STEPPING[backend if backend in STEPPING
+                                                 else "accelerator"])
+    F = max(1, B // share)
+
+    hulls = col.Hulls.of(geometry) if layout.collision_checks else None
+
+    def scene_of(scene) -> SceneView:
+        pick = (lambda a: a[scene])  # noqa: E731
+        return SceneView(jax.tree.map(pick, per_lane), jax.tree.map(pick, spaces),
+                         None if meta is None else jax.tree.map(pick, meta), hulls)
+
+    def checked(ln, p, r, step=None, sd=None):
+        return check(scene_of(ln.scene), ln, p, r, layout, track, step, sd)
+
+    def once(tree, token):
+        # On a CPU, values read by several fusions are computed once (:func:`_once`).
+        return _once(tree, token) if backend == "cpu" else tree
+
+    def begin(ids, occupied):
+        """The lanes ``ids`` and their states before the first step (checked at the
+        start)."""
+        lane = make(scene[ids], start[ids], task[ids])
+        n = ids.shape[0]
+        p_start = jnp.where(lane.perfect, lane.p0,
+                            lane.p0 + lanes(shake)(lane, jnp.zeros(n, dtype)))
+        first = lanes(checked)(lane, p_start, lane.r0)
+        zero = jnp.zeros(n, dtype)
+        live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
+        return lane, State(zero, of(lane.p0), of(first.p), (zero, zero, zero), lane.r0,
+                           jnp.zeros(n, jnp.int32), zero, first.done, first.code,
+                           first.activated, first.clear, zero, live)
+
+    def finish(ln, e):
+        code = jnp.where(e.done, e.code, am.TIMEOUT)
+        activated = jnp.where(e.done, e.activated, -1)
+        k = jnp.where(e.done, e.k, ln.x.max_steps.astype(dtype))
+        return Result(code, activated, k.astype(jnp.int32), jnp.stack(e.p), e.travelled, e.r,
+                      e.meta_steps)
+
+    def step(s: State, lane: Lane) -> State:
+        # Steps are never negative: a condition true at run time that XLA cannot fold.
+        token = s.k[0] >= 0
+        m = lanes(move)(lane, s, once(lanes(aim)(lane, s), token))
+        tol = lane.x.activation_tol + CLEARANCE_MARGIN
+        need = s.live & (s.clear - m.moved <= tol)
+
+        def full(ln, st, mv):
+            def at_gripper(ln, mv):
+                view = scene_of(ln.scene)
+                return sdfs(view.spaces, view.meta, jnp.stack(mv.p), track)
+            sd = once(lanes(at_gripper)(ln, mv), token)
+            return lanes(lambda ln, st, mv, sd: checked(ln, jnp.stack(mv.p), st.r, (st, mv),
+                                                        sd))(ln, st, mv, sd)
+
+        if F >= B:  # share 1, every lane checked: no gathering
+            got = need
+            c = full(lane, s, m)
+            sub_s = s
+
+            def put(a, v):
+                return jnp.where(got, v, a)
+        else:
+            idx, at, got = scheduler.first_true(need, F)
+            pick = (lambda a: a[..., idx])  # noqa: E731
+            sub_s, sub_m, sub_lane = (jax.tree.map(pick, t) for t in (s, m, lane))
+            c = full(sub_lane, sub_s, sub_m)
+
+            def put(a, v):
+                return scheduler.put_at(a, at, v)
+
+        go = s.live & (~need | got)
+
+        def adv(new, old):
+            return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, old)
+
+        p_new = tuple(put(m.p[i], c.p[i]) for i in range(3))
+        t = State(adv(m.k, s.k), adv(m.q, s.q), adv(p_new, s.p),
+                  adv(m.delta, s.last), put(s.r, c.r),
+                  put(s.meta_steps, sub_s.meta_steps + c.counted.astype(jnp.int32)),
+                  adv(put(m.travelled, c.travelled), s.travelled),
+                  put(s.done, c.done), put(s.code, c.code), put(s.activated, c.activated),
+                  put(s.clear, c.clear), adv(put(m.moved, jnp.zeros_like(c.clear)), s.moved),
+                  s.live)
+        steps = lane.x.max_steps.astype(dtype)
+        return t._replace(live=s.live & ~(go & (t.done | (t.k >= steps))))
+
+    result = Result(jnp.full(L, am.TIMEOUT, jnp.int32), jnp.full(L, -1, jnp.int32),
+                    jnp.zeros(L, jnp.int32), jnp.zeros((L, 3), dtype), jnp.zeros(L, dtype),
+                    jnp.zeros((L, 4), dtype), jnp.zeros(L, jnp.int32))
+    result = scheduler.run_queue(order, n_real, B, REFILL_SHARE, unroll, begin, step,
+                                 finish, result)
+    out = am.Outcome(result.code, result.activated, result.step, result.point,
+                     result.path_length)
+    return jax.tree.map(lambda a: a.reshape(S, N, T, *a.shape[1:]),
+                        (out, result.r, result.meta_steps))

@@ -1,0 +1,78 @@
+"""``shacc import-mjcf FILE.xml --out SCENE.toml``: a MuJoCo scene's named geoms and bodies
+as a scene file (``geometry_precompute.mjcf_import``), with the tasks a mapping file or
+``--task`` gives. The scene and its mesh files appear together or not at all: they are
+written into a hidden folder beside ``--out``, the scene is read back (every rule of a
+scene file, and that its objects do not interpenetrate), and only then moved into place."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from geometry_precompute import InputError
+from geometry_precompute.errors import HostError
+from sweeps.output import check_output_file, nearest_existing
+
+
+def _mapping(args) -> tuple[dict, str]:
+    from geometry_precompute.fileio import read_toml
+
+    mapping: dict = read_toml(args.map, "a task mapping (TOML)") if args.map else {}
+    src = str(args.map) if args.map else "<arguments>"
+    tasks = list(mapping.get("tasks", []))
+    for text in args.task:
+        tid, sep, rest = text.partition("=")
+        obj, sep2, template = rest.rpartition(":")
+        if not (sep and sep2 and tid and obj and template):
+            raise InputError("<arguments>", "--task", f"must be ID=OBJECT:TEMPLATE, got {text!r}")
+        tasks.append({"id": tid, "object": obj, "template": template})
+    mapping["tasks"] = tasks
+    mapping["obstacles"] = list(mapping.get("obstacles", [])) + list(args.obstacle)
+    return mapping, src
+
+
+def cmd_import_mjcf(args) -> int:
+    from geometry_precompute import load_scene, precompute
+    from geometry_precompute.fileio import write_atomic
+    from geometry_precompute.mjcf_import import import_mjcf
+
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise InputError("<arguments>", "--out", f"a scene file ends in .toml, got {str(out)!r}")
+    check_output_file(out, "--out")  # its folders exist, or can be made, and are writable
+    mapping, src = _mapping(args)
+    folder = out.parent if str(out.parent) else Path(".")
+    # The draft is written beside the nearest folder that exists (the same file system,
+    # so the moves below are renames); the missing folders are made only at the end.
+    base = nearest_existing(folder)
+    try:
+        work = Path(tempfile.mkdtemp(prefix=".import-", dir=base))
+    except OSError as e:
+        raise HostError(base, "make a working folder", e.strerror or str(e)) from None
+    try:
+        import tomli_w
+
+        table = import_mjcf(args.xml, mapping, work, src)
+        scene_file = work / out.name
+        write_atomic(scene_file, tomli_w.dumps(table).encode())
+        try:
+            scene = load_scene(scene_file)
+            precompute(scene, scene.settings())  # every rule, interpenetration included
+        except InputError as e:  # named by the scene it would have been, not the draft
+            raise InputError(f"{out} (from {args.xml})", e.field, e.rule) from None
+        meshes = [o["mesh"] for o in table["objects"] if o["kind"] == "mesh"]
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise HostError.of(e, folder, "make the folder") from None
+        for name in meshes:
+            os.replace(work / name, folder / name)
+        os.replace(scene_file, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print(f"wrote {out} ({len(table['objects'])} objects, {len(table['tasks'])} tasks"
+          + (f", {len(meshes)} mesh files beside it" if meshes else "") + ")", file=sys.stderr)
+    return 0
