@@ -36,12 +36,14 @@ from .frames import yaw_matrix
 from .population import POPULATED, Population
 from .precomputing import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS, batch_layout
-from .settings import population_range
+from .settings import SPECS, population_range
 from .starts import optimize_start_poses, start_plane, start_poses
 from .templates import TaskSpace
 
 GEOMETRY_FIELDS = schema.names(schema.GEOMETRY)
 PARAM_FIELDS = schema.names(schema.PARAMS)
+# The settings the rollouts read, each with its bake encoding (settings.Param).
+ROLLOUT_PARAMS = tuple((s.name, s.param) for s in SPECS.values() if s.param is not None)
 SEARCH_FIELDS = schema.names(schema.SEARCH)
 _PAD_DIMS = (0.01, 0.01, 0.01)
 
@@ -79,21 +81,21 @@ class BakedScenes:
     dt: np.ndarray
     v_max: np.ndarray
     omega_max: np.ndarray
-    activation_tol: np.ndarray
     max_steps: np.ndarray
+    activation_tol: np.ndarray
     ambiguity_nearest: np.ndarray
+    user_seed: np.ndarray
     collision: np.ndarray
-    gripper_finger_length: np.ndarray
-    gripper_finger_radius: np.ndarray
-    gripper_opening: np.ndarray
-    gripper_palm_radius: np.ndarray
     user_noise: np.ndarray
     user_lag: np.ndarray
     user_tremor: np.ndarray
     user_tremor_hz: np.ndarray
-    user_seed: np.ndarray
     user_aim_object: np.ndarray
     activation_swept: np.ndarray
+    gripper_finger_length: np.ndarray
+    gripper_finger_radius: np.ndarray
+    gripper_opening: np.ndarray
+    gripper_palm_radius: np.ndarray
     user_dist: np.ndarray
     user_dist_args: np.ndarray
     user_dist_values: np.ndarray
@@ -367,13 +369,9 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         out[f"center_{which}"] = np.zeros((S, T, 3))
         out[f"quat_{which}"] = np.tile([1.0, 0.0, 0.0, 0.0], (S, T, 1))
         out[f"dims_{which}"] = np.tile(_PAD_DIMS, (S, T, 1))
-    params = {k: np.zeros(S) for k in PARAM_FIELDS}
-    params["max_steps"] = np.zeros(S, np.int32)
-    params["ambiguity_nearest"] = np.zeros(S, bool)
-    params["collision"] = np.zeros(S, bool)
-    params["user_seed"] = np.zeros(S, np.int32)
-    params["user_aim_object"] = np.zeros(S, bool)
-    params["activation_swept"] = np.zeros(S, bool)
+    # Every rollout setting's field, as its declaration says (settings.SPECS: Param).
+    dtypes = {"float": np.float64, "int": np.int32, "bool": bool}
+    params = {f.name: np.zeros(S, dtypes[f.dtype]) for f in schema.PARAMS[:-3]}
     params["user_dist"] = np.zeros((S, len(POPULATED)), np.int32)
     params["user_dist_args"] = np.zeros((S, len(POPULATED), population.ARGS))
     params["user_dist_values"] = np.zeros((S, len(POPULATED), population.MAX_VALUES))
@@ -414,9 +412,6 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
         out["obj_hull_plane"][si, oi] = plane[pad]
     for si, r in enumerate(results):
         s = r.settings
-        params["collision"][si] = s["collision"] == "on"
-        for k in schema.GRIPPER:
-            params[k][si] = s[k.replace("gripper_", "gripper.")]
         for ti, space in enumerate(r.spaces):
             out["task_mask"][si, ti] = True
             out["kind"][si, ti] = KIND_CODES[r.shapes_init[ti].kind]
@@ -433,21 +428,15 @@ def bake(results: Sequence[PrecomputeResult], max_tasks: int | None = None,
             out["cluster"][si, members] = label
         out["yaw_meta"][si] = all(is_horizontal_approach(out["orient_quat"][si, t])
                                   for members in r.meta_clusters() for t in members)
-        for k in ("dt", "v_max", "omega_max"):
-            params[k][si] = s[k]
-        params["activation_tol"][si] = s["activation_tol"]
-        params["max_steps"][si] = s["max_steps"]
-        params["ambiguity_nearest"][si] = s["ambiguity"] == "nearest"
-        for i, k in enumerate(POPULATED):
+        for name, param in ROLLOUT_PARAMS:
+            value = s[name]
             # A population's own leaf is unused: each rollout draws its value.
-            value = s[k]
-            params[k][si] = 0.0 if isinstance(value, Population) else value
+            params[param.field][si] = 0.0 if isinstance(value, Population) \
+                else param.encode(value)
+        for i, k in enumerate(POPULATED):
             params["user_dist"][si, i], params["user_dist_args"][si, i], \
-                params["user_dist_values"][si, i] = population.encode(value,
+                params["user_dist_values"][si, i] = population.encode(s[k],
                                                                       *population_range(k))
-        params["user_seed"][si] = s["seed"]
-        params["user_aim_object"][si] = s["user_aim"] == "object"
-        params["activation_swept"][si] = s["activation_check"] == "swept"
     labels = {
         "names": [r.scene.name for r in results],
         "task_ids": [r.task_ids for r in results],

@@ -9,9 +9,10 @@ apart from the state for the same reason):
 
 - **Geometry** (:data:`GEOMETRY`): the scenes' arrays, leading axis S. Fixed by the
   precompute: spaces, clusters, orientation spaces, start poses, objects.
-- **Params** (:data:`PARAMS`): every rollout setting, one value per scene (S,). A
-  leading axis of sweep points, (P, S), evaluates P settings over one geometry in
-  one call. Leaves, so new values never recompile.
+- **Params** (:data:`PARAMS`): every rollout setting, one value per scene (S,), as
+  each setting's declaration says (``settings.SPECS``: a setting is declared once, its
+  bake encoding with it). A leading axis of sweep points, (P, S), evaluates P settings
+  over one geometry in one call. Leaves, so new values never recompile.
 - **Layout** (:class:`Layout`): hashable and static, computed once in NumPy by the
   bake (``BakedScenes.layout``, :func:`batch_layout`): padded sizes, the modes, which
   meta-target formula the scenes need, whether the program checks collisions and has
@@ -25,6 +26,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from .population import ARGS, MAX_VALUES, POPULATED
+from .settings import SPECS
 
 # Modes and outcomes (reference/model, statistics).
 MODES = ("baseline", "shrinking", "shacc")
@@ -56,6 +58,17 @@ class Field(NamedTuple):
     shape: tuple  # axis names (S scenes, T tasks, N starts, O objects, ...) or sizes
     dtype: str    # "bool", "int" or "float"
     doc: str
+
+
+def names(fields) -> tuple[str, ...]:
+    return tuple(f.name for f in fields)
+
+
+def _stepped(field: str) -> bool:
+    """Whether the setting whose field this is needs the stepped users' program above
+    zero (``settings.Param.stepped``)."""
+    return any(s.param is not None and s.param.field == field and s.param.stepped
+               for s in SPECS.values())
 
 
 GEOMETRY = (
@@ -100,41 +113,33 @@ GEOMETRY = (
           "in [0, 2^31)): keys the simulated users' random numbers, whatever the batch"),
 )
 
-PARAMS = (
-    Field("dt", ("S",), "float", "control period, s"),
-    Field("v_max", ("S",), "float", "speed, m/s"),
-    Field("omega_max", ("S",), "float", "largest rotation rate, rad/s"),
-    Field("activation_tol", ("S",), "float", "tau: activation tolerance, m"),
-    Field("max_steps", ("S",), "int", "steps before a timeout"),
-    Field("ambiguity_nearest", ("S",), "bool", "ambiguity = nearest (else fail)"),
-    Field("collision", ("S",), "bool", "collision = on: this scene's rollouts are checked"),
-    Field("gripper_finger_length", ("S",), "float", "gripper.finger_length, m"),
-    Field("gripper_finger_radius", ("S",), "float", "gripper.finger_radius, m"),
-    Field("gripper_opening", ("S",), "float", "gripper.opening, m"),
-    Field("gripper_palm_radius", ("S",), "float", "gripper.palm_radius, m"),
-    Field("user_noise", ("S",), "float", "the user's direction noise, rad"),
-    Field("user_lag", ("S",), "float", "probability that a step repeats the last one"),
-    Field("user_tremor", ("S",), "float", "the user's tremor amplitude, m"),
-    Field("user_tremor_hz", ("S",), "float", "its frequency, Hz"),
-    Field("user_seed", ("S",), "int", "seed of the users' random numbers (the seed setting)"),
-    Field("user_aim_object", ("S",), "bool", "user_aim = object: the user steers at the "
-          "task's aim point, not at its space"),
-    Field("activation_swept", ("S",), "bool", "activation_check = swept: a step activates "
-          "where its segment first enters a space"),
-    Field("user_dist", ("S", len(POPULATED)), "int", "per populated user setting "
-          "(POPULATED: user_noise, user_lag, user_tremor, user_tremor_hz) its distribution: "
-          "0 the plain value, 1 uniform, 2 truncated normal, 3 a list of values"),
-    Field("user_dist_args", ("S", len(POPULATED), ARGS), "float", "uniform: (low, high, "
-          "low, high); normal: (mean, sd, low, high) with the range it is truncated to; "
-          "values: (count, 0, 0, 0)"),
-    Field("user_dist_values", ("S", len(POPULATED), MAX_VALUES), "float", "the values of "
-          "a list (zero after count)"),
-)
+def _declared_params() -> tuple[Field, ...]:
+    """Every rollout setting's field, in the order the settings are declared
+    (``settings.SPECS``: each declares its own encoding, ``settings.Param``), then the
+    populations' three fields, which encode a distribution for the POPULATED ones."""
+    fields = [Field(s.param.field, ("S",), s.param.dtype,
+                    s.doc + (f", {s.unit}" if s.unit else "")
+                    + ("" if s.param.field == s.name.replace(".", "_")
+                       else f" (the setting {s.name})"))
+              for s in SPECS.values() if s.param is not None]
+    return (*fields,
+            Field("user_dist", ("S", len(POPULATED)), "int", "per populated user setting "
+                  "(POPULATED: user_noise, user_lag, user_tremor, user_tremor_hz) its "
+                  "distribution: 0 the plain value, 1 uniform, 2 truncated normal, 3 a "
+                  "list of values"),
+            Field("user_dist_args", ("S", len(POPULATED), ARGS), "float", "uniform: (low, "
+                  "high, low, high); normal: (mean, sd, low, high) with the range it is "
+                  "truncated to; values: (count, 0, 0, 0)"),
+            Field("user_dist_values", ("S", len(POPULATED), MAX_VALUES), "float", "the "
+                  "values of a list (zero after count)"))
 
-# All zero (and user_aim_object False): the perfect user. ``user_dist`` above zero: a
-# population, drawn per rollout.
-USER = ("user_noise", "user_lag", "user_tremor", "user_aim_object", "activation_swept",
-        "user_dist")
+
+# Every rollout setting (derived from the settings' declarations) and the populations.
+PARAMS = _declared_params()
+
+# A field above zero needs the stepped users' program (a setting's Param.stepped, and a
+# population); all zero (and user_aim_object False): the perfect user's closed form.
+USER = (*(f for f in names(PARAMS[:-3]) if _stepped(f)), "user_dist")
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),
@@ -159,12 +164,9 @@ SEARCH = (
           "optimize_selection = validation (else the search's best on its own starts)"),
 )
 
-GRIPPER = ("gripper_finger_length", "gripper_finger_radius", "gripper_opening",
-           "gripper_palm_radius")
-
-
-def names(fields) -> tuple[str, ...]:
-    return tuple(f.name for f in fields)
+# The collision gripper's dimensions (the settings gripper.*), in the order Params.gripper
+# stacks them.
+GRIPPER = tuple(f for f in names(PARAMS) if f.startswith("gripper_"))
 
 
 def per_task(fields) -> frozenset[str]:

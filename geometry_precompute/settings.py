@@ -31,7 +31,26 @@ from .population import POPULATED, Population
 
 
 @dataclass(frozen=True)
+class Param:
+    """How a rollout setting crosses to the JAX half: the bake's field (one number per
+    scene: a leaf of ``shacc_jax.Params``, so a sweep over it never recompiles), its
+    dtype, the value it is given for a setting's value, and whether a value other than
+    zero needs the stepped users' program (``schema.USER``)."""
+
+    field: str
+    dtype: str  # "float", "int" or "bool"
+    encode: Callable[[Any], Any] = lambda v: v
+    stepped: bool = False
+
+
+@dataclass(frozen=True)
 class SettingSpec:
+    """One setting, declared once: its name, default, type, unit, valid range (rule,
+    check and JSON Schema), stage, meaning and, for what the rollouts read, its bake
+    encoding (:class:`Param`). ``shacc settings``, the JSON Schemas, the reference's
+    table, the bake's Params fields (``schema.PARAMS``) and what the bake writes into
+    them are all derived from these declarations."""
+
     name: str
     default: Any
     kind: str  # "float", "int", "choice", "int_pair", "float_pair"
@@ -41,6 +60,8 @@ class SettingSpec:
     choices: tuple[str, ...] = ()
     doc: str = ""  # one line of meaning, shown by `shacc settings`
     schema: Mapping[str, Any] = field(default_factory=dict)  # the rule, as JSON Schema
+    unit: str = ""  # SI unit of a number ("" for a count, a probability or a choice)
+    param: Param | None = None
 
 
 # Ranges (issue: inputs past the numeric ranges). Every number has a finite range, so
@@ -75,12 +96,13 @@ _TYPES: dict[str, dict[str, Any]] = {"float": {"type": "number"}, "int": {"type"
                          "maxItems": 2}}
 
 
-def _spec(name: str, default: Any, kind: str, stage: str, rng: tuple, choices=()):
+def _spec(name: str, default: Any, kind: str, stage: str, rng: tuple, choices=(),
+          unit: str = "", param: Param | None = None):
     schema = {**_TYPES[kind], **(rng[2] if len(rng) > 2 else {})}
     if choices:
         schema["enum"] = list(choices)
     return SettingSpec(name, default, kind, stage, rng[0], rng[1], tuple(choices),
-                       schema=schema)
+                       schema=schema, unit=unit, param=param)
 
 
 def _choice(*options: str) -> tuple:
@@ -105,37 +127,54 @@ _SPECS: list[SettingSpec] = [
     # At most ceil(1 / sigma) passes: the lower bound keeps that to a thousand.
     _spec("shrink_step", 0.05, "float", "precompute", _range(1e-3, 1)),
     _spec("shrink_max_iter", 1000, "int", "precompute", _range(1, 10**6)),
-    _spec("dt", 0.02, "float", "rollout", _range(0, 10, lo_open=True)),
-    _spec("v_max", 0.15, "float", "rollout", _range(0, 100, lo_open=True)),
-    _spec("omega_max", 3.0, "float", "rollout", _range(0, 1000, lo_open=True)),
-    _spec("max_steps", 600, "int", "rollout", _range(1, 10**9)),
-    _spec("activation_tol", 1e-4, "float", "rollout", _range(0, 1)),
+    _spec("dt", 0.02, "float", "rollout", _range(0, 10, lo_open=True), unit="s",
+          param=Param("dt", "float")),
+    _spec("v_max", 0.15, "float", "rollout", _range(0, 100, lo_open=True), unit="m/s",
+          param=Param("v_max", "float")),
+    _spec("omega_max", 3.0, "float", "rollout", _range(0, 1000, lo_open=True), unit="rad/s",
+          param=Param("omega_max", "float")),
+    _spec("max_steps", 600, "int", "rollout", _range(1, 10**9), param=Param("max_steps", "int")),
+    _spec("activation_tol", 1e-4, "float", "rollout", _range(0, 1), unit="m",
+          param=Param("activation_tol", "float")),
     _spec("ambiguity", "fail", "choice", "rollout", _choice("fail", "nearest"),
-          ("fail", "nearest")),
+          ("fail", "nearest"), param=Param("ambiguity_nearest", "bool", lambda v: v == "nearest")),
     _spec("start_grid", (6, 6), "int_pair", "starts", _GRID),
-    _spec("start_plane_offset", 0.45, "float", "starts", _range(0, COORD_LIMIT, lo_open=True)),
-    _spec("start_y_halfwidth", 0.45, "float", "starts", _range(0, COORD_LIMIT)),
-    _spec("start_z_range", (0.02, 0.30), "float_pair", "starts", _Z_RANGE),
+    _spec("start_plane_offset", 0.45, "float", "starts", _range(0, COORD_LIMIT, lo_open=True),
+          unit="m"),
+    _spec("start_y_halfwidth", 0.45, "float", "starts", _range(0, COORD_LIMIT), unit="m"),
+    _spec("start_z_range", (0.02, 0.30), "float_pair", "starts", _Z_RANGE, unit="m"),
     _spec("start_orientation", "random", "choice", "starts", _choice("random", "forward"),
           ("random", "forward")),
-    _spec("seed", 0, "int", "starts", _range(0, INT32_MAX)),
-    _spec("collision", "off", "choice", "rollout", _choice("off", "on"), ("off", "on")),
+    # Also the seed of the simulated users' random numbers: the rollouts read it.
+    _spec("seed", 0, "int", "starts", _range(0, INT32_MAX), param=Param("user_seed", "int")),
+    _spec("collision", "off", "choice", "rollout", _choice("off", "on"), ("off", "on"),
+          param=Param("collision", "bool", lambda v: v == "on")),
     # The simulated user (reference/model, "Simulated users"): all zero is the paper's
     # perfect user. Angles in rad, lengths in m; the ranges catch degrees and centimetres.
-    _spec("user_noise", 0.0, "float", "rollout", _range(0, math.pi / 2)),
-    _spec("user_lag", 0.0, "float", "rollout", _range(0, 1, hi_open=True)),
-    _spec("user_tremor", 0.0, "float", "rollout", _range(0, 0.05)),
-    _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True)),
+    _spec("user_noise", 0.0, "float", "rollout", _range(0, math.pi / 2), unit="rad",
+          param=Param("user_noise", "float", stepped=True)),
+    _spec("user_lag", 0.0, "float", "rollout", _range(0, 1, hi_open=True),
+          param=Param("user_lag", "float", stepped=True)),
+    _spec("user_tremor", 0.0, "float", "rollout", _range(0, 0.05), unit="m",
+          param=Param("user_tremor", "float", stepped=True)),
+    _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True), unit="Hz",
+          param=Param("user_tremor_hz", "float")),
     _spec("user_aim", "space", "choice", "rollout", _choice("space", "object"),
-          ("space", "object")),
+          ("space", "object"),
+          param=Param("user_aim_object", "bool", lambda v: v == "object", stepped=True)),
     _spec("activation_check", "steps", "choice", "rollout", _choice("steps", "swept"),
-          ("steps", "swept")),
+          ("steps", "swept"),
+          param=Param("activation_swept", "bool", lambda v: v == "swept", stepped=True)),
     # The gripper of collision = "on" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
-    _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True)),
-    _spec("gripper.finger_radius", 0.008, "float", "rollout", _range(0, 1, lo_open=True)),
-    _spec("gripper.opening", 0.10, "float", "rollout", _range(0, 1, lo_open=True)),
-    _spec("gripper.palm_radius", 0.015, "float", "rollout", _range(0, 1, lo_open=True)),
+    _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True), unit="m",
+          param=Param("gripper_finger_length", "float")),
+    _spec("gripper.finger_radius", 0.008, "float", "rollout", _range(0, 1, lo_open=True), unit="m",
+          param=Param("gripper_finger_radius", "float")),
+    _spec("gripper.opening", 0.10, "float", "rollout", _range(0, 1, lo_open=True), unit="m",
+          param=Param("gripper_opening", "float")),
+    _spec("gripper.palm_radius", 0.015, "float", "rollout", _range(0, 1, lo_open=True), unit="m",
+          param=Param("gripper_palm_radius", "float")),
     _spec("mesh_sections", 32, "int", "precompute", _range(8, 1024)),
     _spec("entropy_variant", "formula", "choice", "precompute",
           _choice("formula", "reference_code"), ("formula", "reference_code")),
@@ -154,59 +193,59 @@ _SPECS: list[SettingSpec] = [
     _spec("optimize_selection", "validation", "choice", "optimize",
           _choice("validation", "search"), ("validation", "search")),
     # Template defaults (the scene format's table).
-    _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN),
-    _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN),
-    _spec("side_grasp.height_margin", 0.05, "float", "precompute", _NONNEG_LEN),
-    _spec("handle_grasp.length_init", 0.30, "float", "precompute", _POS_LEN),
-    _spec("handle_grasp.length_min", 0.10, "float", "precompute", _POS_LEN),
+    _spec("side_grasp.radius_init", 0.20, "float", "precompute", _POS_LEN, unit="m"),
+    _spec("side_grasp.radius_margin", 0.05, "float", "precompute", _NONNEG_LEN, unit="m"),
+    _spec("side_grasp.height_margin", 0.05, "float", "precompute", _NONNEG_LEN, unit="m"),
+    _spec("handle_grasp.length_init", 0.30, "float", "precompute", _POS_LEN, unit="m"),
+    _spec("handle_grasp.length_min", 0.10, "float", "precompute", _POS_LEN, unit="m"),
     # 30 and 10 degrees exactly; not the rounded 0.5236 and 0.1745.
     _spec("handle_grasp.half_angle_init", math.radians(30.0), "float", "precompute",
-          _HALF_ANGLE),
+          _HALF_ANGLE, unit="rad"),
     _spec("handle_grasp.half_angle_min", math.radians(10.0), "float", "precompute",
-          _HALF_ANGLE),
-    _spec("handle_grasp.handle_offset", 0.03, "float", "precompute", _NONNEG_LEN),
-    _spec("top_grasp.radius_init", 0.15, "float", "precompute", _POS_LEN),
-    _spec("top_grasp.radius_margin", 0.02, "float", "precompute", _NONNEG_LEN),
-    _spec("top_grasp.offset", 0.10, "float", "precompute", _NONNEG_LEN),
-    _spec("top_grasp.thickness", 0.04, "float", "precompute", _POS_LEN),
-    _spec("drawer_pull.depth_init", 0.25, "float", "precompute", _POS_LEN),
-    _spec("drawer_pull.depth_min", 0.08, "float", "precompute", _POS_LEN),
+          _HALF_ANGLE, unit="rad"),
+    _spec("handle_grasp.handle_offset", 0.03, "float", "precompute", _NONNEG_LEN, unit="m"),
+    _spec("top_grasp.radius_init", 0.15, "float", "precompute", _POS_LEN, unit="m"),
+    _spec("top_grasp.radius_margin", 0.02, "float", "precompute", _NONNEG_LEN, unit="m"),
+    _spec("top_grasp.offset", 0.10, "float", "precompute", _NONNEG_LEN, unit="m"),
+    _spec("top_grasp.thickness", 0.04, "float", "precompute", _POS_LEN, unit="m"),
+    _spec("drawer_pull.depth_init", 0.25, "float", "precompute", _POS_LEN, unit="m"),
+    _spec("drawer_pull.depth_min", 0.08, "float", "precompute", _POS_LEN, unit="m"),
 ]
 
 # One line of meaning per setting (reference/scenes, model, statistics, mujoco, settings).
 _DOCS = {
     "shrink_step": "Shrinking's step: the fraction of its range a space loses per pass (sigma)",
     "shrink_max_iter": "most Shrinking passes",
-    "dt": "Automaton time step, s",
-    "v_max": "the simulated user's speed towards its task's space, m/s",
-    "omega_max": "the arm's rotation limit while the meta skill turns the gripper, rad/s",
+    "dt": "Automaton time step",
+    "v_max": "the simulated user's speed towards its task's space",
+    "omega_max": "the arm's rotation limit while the meta skill turns the gripper",
     "max_steps": "steps before a rollout ends as a timeout (T_max)",
-    "activation_tol": "a skill activates when the gripper is within this of its space, m",
+    "activation_tol": "a skill activates when the gripper is within this of its space",
     "ambiguity": "several spaces at once: fail (ambiguous) or nearest (activate the closest)",
     "start_grid": "start poses on the start plane: [n_y, n_z]",
-    "start_plane_offset": "start plane's distance in front of the frontmost object, m",
-    "start_y_halfwidth": "start plane's half width around the objects' mean y, m",
-    "start_z_range": "start plane's height band [low, high], m",
+    "start_plane_offset": "start plane's distance in front of the frontmost object",
+    "start_y_halfwidth": "start plane's half width around the objects' mean y",
+    "start_z_range": "start plane's height band [low, high]",
     "start_orientation": "start orientations: random (seeded) or forward (approach +x)",
     "seed": "seed of the random start orientations and of the simulated user's random "
             "numbers",
     "collision": "gripper collision checking: off, or on (exact capsule checks against "
                  "cylinders and boxes, as MuJoCo's; \"mjx\", its old name, still works)",
     "user_noise": "simulated user: each step's direction turned by |N(0, user_noise^2)| "
-                  "about a random axis across it, rad",
+                  "about a random axis across it",
     "user_lag": "simulated user: probability that a step repeats the previous one",
     "user_tremor": "simulated user: amplitude of a tremor of the gripper about the "
-                   "commanded position, along a random axis, m",
-    "user_tremor_hz": "simulated user: the tremor's frequency, Hz",
+                   "commanded position, along a random axis",
+    "user_tremor_hz": "simulated user: the tremor's frequency",
     "user_aim": "simulated user: steers at the closest point of its task's space, or at "
                 "the object (the template's aim point)",
     "activation_check": "where activation is checked: at the step positions (steps, the "
                         "paper's), or along each step's segment, at its first entry into a "
                         "space (swept)",
-    "gripper.finger_length": "collision gripper: finger capsule length, m",
-    "gripper.finger_radius": "collision gripper: finger capsule radius, m",
-    "gripper.opening": "collision gripper: distance between the finger axes, m",
-    "gripper.palm_radius": "collision gripper: palm capsule radius, m",
+    "gripper.finger_length": "collision gripper: finger capsule length",
+    "gripper.finger_radius": "collision gripper: finger capsule radius",
+    "gripper.opening": "collision gripper: distance between the finger axes",
+    "gripper.palm_radius": "collision gripper: palm capsule radius",
     "mesh_sections": "mesh sections of the clutteredness booleans (pairs with no fast path)",
     "entropy_variant": "entropic clutteredness h: formula (paper) or reference_code",
     "bootstrap_resamples": "resamples of the bootstrap confidence intervals",
@@ -221,20 +260,20 @@ _DOCS = {
     "optimize_selection": "optimized mode: validation (ties to lower C, then larger spaces; "
                           "chosen on the validation starts, ties to Shrinking) or search "
                           "(the search's best on its own starts, ties to larger spaces)",
-    "side_grasp.radius_init": "side grasp cylinder's initial radius, m",
-    "side_grasp.radius_margin": "side grasp's smallest radius is object radius + this, m",
-    "side_grasp.height_margin": "side grasp cylinder reaches this far above the object, m",
-    "handle_grasp.length_init": "handle grasp cone's initial length, m",
-    "handle_grasp.length_min": "handle grasp cone's smallest length, m",
-    "handle_grasp.half_angle_init": "handle grasp cone's initial half-angle, rad",
-    "handle_grasp.half_angle_min": "handle grasp cone's smallest half-angle, rad",
-    "handle_grasp.handle_offset": "handle grasp point's distance outside the cup's wall, m",
-    "top_grasp.radius_init": "top grasp disk's initial radius, m",
-    "top_grasp.radius_margin": "top grasp's smallest radius is object radius + this, m",
-    "top_grasp.offset": "top grasp disk's centre height above the object's top, m",
-    "top_grasp.thickness": "top grasp disk's thickness, m",
-    "drawer_pull.depth_init": "drawer pull box's initial depth out from the face, m",
-    "drawer_pull.depth_min": "drawer pull box's smallest depth, m",
+    "side_grasp.radius_init": "side grasp cylinder's initial radius",
+    "side_grasp.radius_margin": "side grasp's smallest radius is object radius + this",
+    "side_grasp.height_margin": "side grasp cylinder reaches this far above the object",
+    "handle_grasp.length_init": "handle grasp cone's initial length",
+    "handle_grasp.length_min": "handle grasp cone's smallest length",
+    "handle_grasp.half_angle_init": "handle grasp cone's initial half-angle",
+    "handle_grasp.half_angle_min": "handle grasp cone's smallest half-angle",
+    "handle_grasp.handle_offset": "handle grasp point's distance outside the cup's wall",
+    "top_grasp.radius_init": "top grasp disk's initial radius",
+    "top_grasp.radius_margin": "top grasp's smallest radius is object radius + this",
+    "top_grasp.offset": "top grasp disk's centre height above the object's top",
+    "top_grasp.thickness": "top grasp disk's thickness",
+    "drawer_pull.depth_init": "drawer pull box's initial depth out from the face",
+    "drawer_pull.depth_min": "drawer pull box's smallest depth",
 }
 _SPECS = [replace(s, doc=_DOCS[s.name]) for s in _SPECS]
 
@@ -258,7 +297,7 @@ def population_range(name: str) -> tuple[float, float]:
 
 
 def describe() -> list[dict[str, str]]:
-    """Every setting as a row (name, default, type, rule, stage, meaning): what
+    """Every setting as a row (name, default, type, unit, rule, stage, meaning): what
     ``shacc settings`` prints."""
     kinds = {"float": "number", "int": "integer", "choice": "one of",
              "int_pair": "[int, int]", "float_pair": "[number, number]"}
@@ -268,7 +307,7 @@ def describe() -> list[dict[str, str]]:
         kind = kinds[s.kind] + (" " + "|".join(s.choices) if s.choices else "")
         rows.append({"name": s.name, "default": str(default),
                      "type": kind + (" or population" if s.name in POPULATED else ""),
-                     "rule": s.rule, "stage": s.stage, "meaning": s.doc})
+                     "unit": s.unit, "rule": s.rule, "stage": s.stage, "meaning": s.doc})
     return rows
 
 # Object dimensions (reference/scenes): per-object fields of a scene file, not settings,

@@ -20,9 +20,12 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from . import automaton as am
+from . import body_distance as bodies
 from . import collision as col
+from . import gripper as grip
 from . import shapes
 from .assistance import MetaSpaces, meta_skill
+from .hulls import Hulls
 from .rollout_state import Check, Lane, Move, State
 from .types import COLLISION, Geometry, Layout
 from .vec3 import length
@@ -43,7 +46,7 @@ class SceneView(NamedTuple):
     geometry: Geometry
     spaces: shapes.Prepared
     meta: MetaSpaces | None
-    hulls: col.Hulls | None
+    hulls: Hulls | None
 
 
 def sdfs(spaces: shapes.Prepared, meta: MetaSpaces | None, p: Array,
@@ -91,8 +94,8 @@ def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, trac
         # cannot be touched, a bound as 1-Lipschitz as the spaces' sdfs.
         kind, centre, mat, size, mask = objects
         local = jnp.einsum("oji,oj->oi", mat, p[None, :] - centre)
-        apart = col.point_distance(tuple(local.T), kind, tuple(size.T))
-        gap = jnp.min(jnp.where(mask, apart, inf)) - col.gripper_reach(dims)
+        apart = bodies.point_distance(tuple(local.T), kind, tuple(size.T))
+        gap = jnp.min(jnp.where(mask, apart, inf)) - grip.gripper_reach(dims)
         clear = jnp.where(x.collision, jnp.minimum(clear, gap + tau), clear)
     done = jnp.any(active) | hit
     code, activated = am.outcome_codes(am.Activation(jnp.zeros((), dtype), active, dist),

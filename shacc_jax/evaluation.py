@@ -31,6 +31,7 @@ from geometry_precompute.schema import PARAMS, lanes_per_block_default
 from . import automaton as am
 from . import collision as col
 from . import lanes as lane_scheduler
+from . import path_cull as cull
 from . import populations, stepping, tracking
 from .metrics import batch_metrics
 from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
@@ -71,7 +72,7 @@ def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
     dtype = geometry.starts.dtype
     inf = jnp.asarray(jnp.inf, dtype)
     S, N, T = act_step.shape
-    bounds = (jax.vmap(col.object_bounds)(geometry.obj_kind, geometry.obj_center,
+    bounds = (jax.vmap(cull.object_bounds)(geometry.obj_kind, geometry.obj_center,
                                           geometry.obj_quat, geometry.obj_size)
               if collide else None)
     init = prep.init if prep is not None else None
@@ -87,7 +88,7 @@ def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
                 m_from, m_to = inf, -inf
             if collide:
                 turn_from = jnp.where(m_from <= m_to, m_from, inf)
-                first, last = col.path_window(bounds, g.obj_center, g.obj_mask, p.gripper(),
+                first, last = cull.path_window(bounds, g.obj_center, g.obj_mask, p.gripper(),
                                               start[3:], path, turn_from, x["max_steps"])
                 end = jnp.where(jnp.isfinite(k_act), k_act, x["max_steps"].astype(dtype))
                 touch = p.collision & (first <= jnp.minimum(last, end))
@@ -122,7 +123,7 @@ def _lane_pass(geometry: Geometry, params: Params, path: am.Path, act: am.Activa
     first colliding sample (inf for none).
 
     Each lane's window (:class:`Windows`) joins its meta window with the samples at
-    which the gripper can touch an object (``collision.path_window``), up to the
+    which the gripper can touch an object (``path_cull.path_window``), up to the
     activation sample. The lane scheduler (``lanes``) runs blocks of lanes x W samples;
     per block (:func:`_block_step`): the rotation rule (``tracking.block_rotation``),
     then the collision checks of all B x W poses at once against the lanes' touchable

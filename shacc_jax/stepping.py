@@ -24,11 +24,11 @@ from jaxtyping import Array, Bool
 from geometry_precompute.schema import lanes_per_block_default
 
 from . import automaton as am
-from . import collision as col
 from . import lanes as scheduler
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
 from .assistance import prepare
+from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
 from .streams import rollout_draws, rollout_key, step_key
@@ -157,7 +157,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                                                  else "accelerator"])
     F = max(1, B // share)
 
-    hulls = col.Hulls.of(geometry) if layout.collision_checks else None
+    hulls = Hulls.of(geometry) if layout.collision_checks else None
 
     def scene_of(scene) -> SceneView:
         pick = (lambda a: a[scene])  # noqa: E731

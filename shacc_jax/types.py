@@ -143,21 +143,21 @@ class Params(NamedTuple):
     dt: Float[Array, "*P S"]
     v_max: Float[Array, "*P S"]
     omega_max: Float[Array, "*P S"]
-    activation_tol: Float[Array, "*P S"]
     max_steps: Int[Array, "*P S"]
+    activation_tol: Float[Array, "*P S"]
     ambiguity_nearest: Bool[Array, "*P S"]
+    user_seed: Int[Array, "*P S"]
     collision: Bool[Array, "*P S"]
-    gripper_finger_length: Float[Array, "*P S"]
-    gripper_finger_radius: Float[Array, "*P S"]
-    gripper_opening: Float[Array, "*P S"]
-    gripper_palm_radius: Float[Array, "*P S"]
     user_noise: Float[Array, "*P S"]
     user_lag: Float[Array, "*P S"]
     user_tremor: Float[Array, "*P S"]
     user_tremor_hz: Float[Array, "*P S"]
-    user_seed: Int[Array, "*P S"]
     user_aim_object: Bool[Array, "*P S"]
     activation_swept: Bool[Array, "*P S"]
+    gripper_finger_length: Float[Array, "*P S"]
+    gripper_finger_radius: Float[Array, "*P S"]
+    gripper_opening: Float[Array, "*P S"]
+    gripper_palm_radius: Float[Array, "*P S"]
     user_dist: Int[Array, "*P S 4"]
     user_dist_args: Float[Array, "*P S 4 4"]
     user_dist_values: Float[Array, "*P S 4 16"]
@@ -169,7 +169,7 @@ class Params(NamedTuple):
         return _read(cls, baked, dtype, on_host)
 
     def gripper(self) -> Float[Array, "... 4"]:
-        """[finger_length, finger_radius, opening, palm_radius] (collision.gripper_geoms)."""
+        """[finger_length, finger_radius, opening, palm_radius] (``gripper.gripper_geoms``)."""
         return jnp.stack([getattr(self, k) for k in schema.GRIPPER], axis=-1)
 
 

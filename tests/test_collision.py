@@ -18,7 +18,10 @@ import shacc_jax
 from geometry_precompute import bake, precompute, scene_from_dict
 from geometry_precompute.schema import BOX, CYLINDER
 from shacc_jax import automaton as am
+from shacc_jax import body_distance as bodies
 from shacc_jax import collision as col
+from shacc_jax import gripper as grip
+from shacc_jax import path_cull as cull
 from shacc_jax.types import COLLISION, SUCCESS, Geometry, Params
 
 MODES = {m: i for i, m in enumerate(shacc_jax.MODES)}
@@ -46,7 +49,7 @@ def test_gripper_capsules_match_the_reference_layout():
     for _ in range(20):
         p, r = rng.normal(size=3) * 0.1, Rotation.random(random_state=rng)
         q = jnp.asarray(np.roll(r.as_quat(), 1), jnp.float32)
-        centres, mats, sizes = col.gripper_geoms(jnp.asarray(p, jnp.float32), q,
+        centres, mats, sizes = grip.gripper_geoms(jnp.asarray(p, jnp.float32), q,
                                                  Params.from_bake(baked).gripper()[0])
         ref.deepest(p, r)  # poses the reference capsules
         np.testing.assert_allclose(centres, ref.data.geom_xpos[ref.capsules], atol=1e-6)
@@ -69,7 +72,7 @@ def test_capsule_axes_are_mujocos_capsules():
         q = jnp.asarray(np.roll(r.as_quat(), 1), jnp.float32)
         ref.deepest(p, r)  # poses the reference capsules
         for c, (start, extent, radius) in enumerate(
-                col.capsule_axes(jnp.asarray(p, jnp.float32), q, dims)):
+                grip.capsule_axes(jnp.asarray(p, jnp.float32), q, dims)):
             g = ref.capsules[c]
             half = ref.data.geom_xmat[g].reshape(3, 3)[:, 2] * ref.model.geom_size[g, 1]
             lo, hi = ref.data.geom_xpos[g] - half, ref.data.geom_xpos[g] + half
@@ -266,7 +269,7 @@ def test_swept_capsule_interval_is_exact(seed, parallel):
     c0, e1 = rng.uniform(-0.2, 0.2, 3), rng.normal(size=3) * 0.1
     e2 = -0.7 * e1 if parallel else rng.normal(size=3) * 0.1
     rho = rng.uniform(0.01, 0.1)
-    lo, hi = (float(v) for v in jax.jit(col.line_rounded_parallelogram)(
+    lo, hi = (float(v) for v in jax.jit(cull.line_rounded_parallelogram)(
         *(jnp.asarray(a, jnp.float64 if jax.config.x64_enabled else jnp.float32)
           for a in (u, c0, e1, e2, rho))))
     ts = np.linspace(-0.6, 0.6, 2401)
@@ -330,13 +333,13 @@ def _window_and_penetrations(kind, centre, quat, size, p0, c0, r0):
         s = jnp.asarray(0.005, jnp.float32)
         path = am.Path(p0, c0, diff / length, length,
                        jnp.minimum(jnp.ceil(length / s), steps + 1), s)
-        first, last = col.path_window(col.object_bounds(kind, centre, quat, size), centre,
+        first, last = cull.path_window(cull.object_bounds(kind, centre, quat, size), centre,
                                       mask, gripper, r0, path,
                                       jnp.asarray(jnp.inf, jnp.float32), steps)
 
         def per_object(k):  # (O,): whether the gripper penetrates each object at sample k
             a, d, radius = col.pair_axes(objects, am.sample(path, k), r0, gripper)
-            dist = col.segment_distance(a, d, kind[None, :], size[None, :, :])
+            dist = bodies.segment_distance(a, d, kind[None, :], size[None, :, :])
             return jnp.any(dist < radius[:, None] - col.PENETRATION_EPS, axis=0) & mask
 
         return first, last, jax.vmap(per_object)(jnp.arange(STEPS + 1.0))
@@ -363,7 +366,7 @@ def test_segment_distance_searches_find_the_minimum():
     kind = rng.choice([CYLINDER, BOX], n)
     size = rng.uniform(0.01, 0.08, (n, 3))
     args = [jnp.asarray(x, jnp.float32) for x in (a, d, kind, size)]
-    got = np.asarray(jax.jit(col.segment_distance)(*args))
+    got = np.asarray(jax.jit(bodies.segment_distance)(*args))
     ts = np.linspace(0.0, 1.0, 4001)
     for i in range(n):
         sampled = min(_np_point_distance(a[i] + t * d[i], kind[i], size[i]) for t in ts)

@@ -22,6 +22,7 @@ from geometry_precompute.batch import bake_batch
 from geometry_precompute.mjcf import scene_to_mjcf
 from geometry_precompute.schema import MESH
 from shacc_jax import collision as col
+from shacc_jax.hulls import Hulls, hull_distance
 from shacc_jax.types import COLLISION, Geometry, Params
 
 KITCHEN = "sweeps/configs/kitchen_meshes"
@@ -39,7 +40,7 @@ def _brute_distance(hull: trimesh.Trimesh, a, d, samples: int = 257) -> float:
     return float(trimesh.proximity.ProximityQuery(hull).on_surface(points)[1].min())
 
 
-_HULL_DISTANCE = jax.jit(jax.vmap(col.hull_distance, (None, None, 0, 0)))
+_HULL_DISTANCE = jax.jit(jax.vmap(hull_distance, (None, None, 0, 0)))
 
 
 @settings(max_examples=25)
@@ -113,7 +114,7 @@ def test_gripper_near_meshes_agrees_with_cpu_mujoco(meshes):
     sc = Geometry.from_bake(b)
     objects = col.scene_objects(sc.obj_kind[0], sc.obj_center[0], sc.obj_quat[0],
                                 sc.obj_size[0], sc.obj_mask[0])
-    hulls = col.Hulls.of(sc)
+    hulls = Hulls.of(sc)
     gripper = Params.from_bake(b).gripper()[0]
     rng = np.random.default_rng(5)
     n = 6000

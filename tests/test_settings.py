@@ -166,3 +166,50 @@ def test_the_old_collision_value_is_read_as_on_with_a_warning():
     schema = Draft202012Validator(settings_schema())
     assert all(schema.is_valid({"collision": v}) for v in ("off", "on", "mjx"))
     assert not schema.is_valid({"collision": "yes"})
+
+
+def test_each_setting_is_declared_once_and_reaches_the_bake(shipped_results):
+    """A setting's declaration (settings.SPECS) carries its bake encoding: every Params
+    field but the populations' comes from exactly one declaration, every declaration
+    with an encoding reaches its field, and what the bake writes there is the
+    declaration's encoding of the scene's value; every setting the rollouts read
+    (stage rollout) has one. A Params field without a declaration, or a declaration
+    that reaches no field, fails here."""
+    import dataclasses
+
+    from geometry_precompute import bake, schema
+    from shacc_jax.types import Params
+
+    declared = {s.param.field: s for s in SPECS.values() if s.param is not None}
+    populations = ("user_dist", "user_dist_args", "user_dist_values")
+    assert len(declared) == sum(s.param is not None for s in SPECS.values())  # one each
+    assert set(Params._fields) == set(declared) | set(populations)
+    assert schema.names(schema.PARAMS) == Params._fields
+    assert all(s.param is not None for s in SPECS.values() if s.stage == "rollout")
+    for f in schema.PARAMS:
+        if f.name in declared:
+            assert f.dtype == declared[f.name].param.dtype, f.name
+    # What the bake writes: a batch whose settings differ from the defaults in each
+    # encoded setting, read back field by field.
+    # (collision checks and the swept check exclude each other: two batches).
+    r = shipped_results[0]
+    for over in ({"v_max": 0.3, "ambiguity": "nearest", "seed": 7, "collision": "on",
+                  "user_aim": "object", "gripper.opening": 0.12, "max_steps": 321,
+                  "user_tremor": 0.004},
+                 {"activation_check": "swept", "dt": 0.01, "user_noise": 0.2}):
+        b = bake([dataclasses.replace(r, settings=r.settings.with_overrides(over))])
+        for field, spec in declared.items():
+            value = over.get(spec.name, DEFAULTS[spec.name])
+            assert getattr(b, field)[0] == spec.param.encode(value), (field, value)
+
+
+def test_every_number_has_a_unit_where_it_has_one():
+    """Lengths, angles, times and rates declare their unit, which `shacc settings`
+    shows; counts, probabilities and choices have none."""
+    from geometry_precompute.settings import describe
+
+    units = {s.name: s.unit for s in SPECS.values()}
+    assert units["v_max"] == "m/s" and units["dt"] == "s" and units["user_noise"] == "rad"
+    assert units["side_grasp.radius_init"] == "m" and units["user_lag"] == ""
+    assert units["max_steps"] == "" and units["ambiguity"] == ""
+    assert {r["name"]: r["unit"] for r in describe()} == units

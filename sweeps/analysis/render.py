@@ -126,11 +126,11 @@ def rollout_path(ev, mode: str, start: int, task: str | int, s: int = 0) -> Roll
     """One rollout of ``mode`` from an evaluated batch ``ev``
     (:func:`sweeps.pipeline.evaluate_results`, ``mode`` among its modes): where it
     started and ended, its outcome, and the gripper's capsules there
-    (``collision.gripper_geoms``, sized by the scene's ``gripper.*`` settings)."""
+    (``shacc_jax.gripper.gripper_geoms``, sized by the scene's ``gripper.*`` settings)."""
     import jax.numpy as jnp
 
     from geometry_precompute.schema import OUTCOMES
-    from shacc_jax.collision import gripper_geoms
+    from shacc_jax.gripper import gripper_geoms
 
     result = ev.results[s]
     t = task_index(result, str(task))

@@ -7,7 +7,7 @@ decides every penetration as MuJoCo does, and what MJX's pipeline would have dec
 instead (the reason the check does not use it). The three see the same geoms: the
 scene's exported MJCF (a mesh object as its solid, which MuJoCo and MJX take as its
 convex hull) and the gripper's three capsules, posed as
-``shacc_jax.collision.gripper_geoms`` poses them.
+``shacc_jax.gripper.gripper_geoms`` poses them.
 
 - **shacc**: ``shacc_jax.collision.deepest``, every pair measured exactly.
 - **MuJoCo** (the reference): ``mj_geomDistance`` of every (object, capsule) pair whose
@@ -82,6 +82,8 @@ def check(result, poses: int = 2000, seed: int = 0, spread: float = 0.06) -> dic
     import shacc_jax.collision as col
     from geometry_precompute import bake
     from geometry_precompute.mjcf import scene_to_mjcf
+    from shacc_jax.gripper import gripper_geoms
+    from shacc_jax.hulls import Hulls
     from shacc_jax.types import Geometry, Params
 
     if not result.scene.objects:
@@ -98,11 +100,11 @@ def check(result, poses: int = 2000, seed: int = 0, spread: float = 0.06) -> dic
     P32, Q32 = jnp.asarray(P, jnp.float32), jnp.asarray(Q, jnp.float32)
     scene_objects = col.scene_objects(g.obj_kind[0], g.obj_center[0], g.obj_quat[0],
                                       g.obj_size[0], g.obj_mask[0])
-    hulls = col.Hulls.of(g)
+    hulls = Hulls.of(g)
     grip = jnp.asarray(dims, jnp.float32)
     ours = np.asarray(jax.jit(jax.vmap(lambda p, q: col.deepest(
         scene_objects, p, q, grip, hulls, 0, jnp.inf)))(P32, Q32))
-    geoms = jax.vmap(col.gripper_geoms, (0, 0, None))(P32, Q32, grip)
+    geoms = jax.vmap(gripper_geoms, (0, 0, None))(P32, Q32, grip)
     centres, mats = np.asarray(geoms[0], float), np.asarray(geoms[1], float)
 
     data = mujoco.MjData(model)

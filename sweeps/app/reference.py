@@ -21,7 +21,7 @@ from pathlib import Path
 from geometry_precompute.settings import describe
 from sweeps.analysis.tables import COLUMNS
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "reference"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "reference"
 
 
 def _cell(text: str) -> str:
@@ -29,12 +29,12 @@ def _cell(text: str) -> str:
 
 
 def settings_table() -> str:
-    rows = ["| name | default | type | rule | stage | meaning |",
-            "| --- | --- | --- | --- | --- | --- |"]
+    rows = ["| name | default | type | unit | rule | stage | meaning |",
+            "| --- | --- | --- | --- | --- | --- | --- |"]
     for r in describe():
         rows.append("| " + " | ".join(_cell(x) for x in (
-            f"`{r['name']}`", f"`{r['default']}`", r["type"], r["rule"], r["stage"],
-            r["meaning"])) + " |")
+            f"`{r['name']}`", f"`{r['default']}`", r["type"], r["unit"], r["rule"],
+            r["stage"], r["meaning"])) + " |")
     return "\n".join(rows)
 
 

@@ -1,5 +1,5 @@
-"""``shacc settings``: every setting (reference/settings) with its default, type, valid
-range, stage and meaning, read from the one place they are defined
+"""``shacc settings``: every setting (reference/settings) with its default, type, unit,
+valid range, stage and meaning, read from the one place they are declared
 (``geometry_precompute.settings``)."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ def cmd_settings(args) -> int:
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
-    cols = ("name", "default", "type", "rule", "meaning")
+    cols = ("name", "default", "type", "unit", "rule", "meaning")
     width = {c: max(len(c), *(len(r[c]) for r in rows)) for c in cols[:-1]}
     print("  ".join(c.ljust(width.get(c, 0)) for c in cols).rstrip())
     for r in rows:
