@@ -24,7 +24,8 @@ if TYPE_CHECKING:  # what __getattr__ loads, for type checkers and editors
     from .scene import Scene, save_scene
     from .settings import DEFAULTS, SPECS, Settings
 
-_WHERE = {
+# The names the package loads on first use (PEP 562): name -> the module that defines it.
+LAZY_NAMES = {
     "BakedScenes": "baking", "bake": "baking",
     "HostError": "errors", "InputError": "errors",
     "random_scene": "generate",
@@ -36,7 +37,7 @@ _WHERE = {
 
 
 def __getattr__(name: str):
-    module = _WHERE.get(name)
+    module = LAZY_NAMES.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
@@ -45,7 +46,7 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_WHERE})
+    return sorted({*globals(), *LAZY_NAMES})
 
 
 def shipped_scene_paths() -> list[Path]:
@@ -57,7 +58,7 @@ def shipped_scene_paths() -> list[Path]:
         from geometry_precompute import load_scene, shipped_scene_paths
         scenes = [load_scene(p) for p in shipped_scene_paths()]   # 12 scenes
     """
-    from importlib.resources import files
+    from importlib.resources import files  # deferred: 10 ms to import
 
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes").iterdir()
                   if str(p).endswith(".toml"))
@@ -74,7 +75,7 @@ def extra_scene_paths() -> list[Path]:
         >>> [load_scene(p).name for p in extra_scene_paths()][:1]
         ['tray-between-mugs']
     """
-    from importlib.resources import files
+    from importlib.resources import files  # deferred: 10 ms to import
 
     return sorted(Path(str(p)) for p in files(__package__).joinpath("scenes", "extra").iterdir()
                   if str(p).endswith(".toml"))

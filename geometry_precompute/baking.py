@@ -33,6 +33,7 @@ from . import population, schema
 from .bodies import object_body
 from .errors import InputError
 from .frames import yaw_matrix
+from .mesh_objects import hull
 from .population import POPULATED, Population
 from .precomputing import PrecomputeResult
 from .schema import KIND_CODES, MAX_PARAMS, batch_layout
@@ -277,7 +278,6 @@ def _placed_hull(obj, center) -> tuple[np.ndarray, np.ndarray]:
     """A mesh object's hull (``mesh_objects.hull``) turned by its yaw and placed about
     ``center``: triangles (F, 3, 3) and planes (F, 4), the offsets computed in float64
     where they are placed."""
-    from .mesh_objects import hull
 
     tri, normals = hull(obj.mesh)
     turn = yaw_matrix(obj.yaw)

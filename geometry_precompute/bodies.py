@@ -11,6 +11,9 @@ import numpy as np
 
 from .errors import InputError
 from .frames import IDENTITY, quat_of_rotation, yaw_matrix
+from .intersect import SpaceSet
+from .mesh_objects import placed, solid
+from .meshes import shape_trimesh
 from .scene import INTERPENETRATION_TOL, Scene, SceneObject
 from .shapes import Shape, aabbs_overlap
 
@@ -34,10 +37,8 @@ def object_solid(obj: SceneObject, sections: int = 32):
     """The object's solid as a trimesh in the world frame: a mesh object's mesh (or its
     convex hull, ``mesh_objects``), a primitive's shape meshed with ``sections``."""
     if obj.mesh is not None:
-        from .mesh_objects import solid
 
         return solid(obj.mesh, obj.position, obj.yaw)
-    from .meshes import shape_trimesh
 
     return shape_trimesh(object_body(obj), sections)
 
@@ -68,7 +69,6 @@ def check_bodies_apart(scene: Scene) -> None:
     distance is below -1e-6 m; a pair with a mesh object where their bounding bodies
     meet (a mesh's bounding upright cylinder) and their solids share more than
     MESH_OVERLAP_TOL (manifold3d's exact boolean)."""
-    from .intersect import SpaceSet
 
     bodies = SpaceSet([object_body(o) for o in scene.objects])
     solids: dict[int, object] = {}
@@ -96,7 +96,6 @@ def _solid_box(obj: SceneObject) -> tuple[np.ndarray, np.ndarray]:
     """A world axis-aligned box around the object's solid."""
     if obj.mesh is None:
         return object_body(obj).aabb()
-    from .mesh_objects import placed
 
     v = placed(obj.mesh, obj.position, obj.yaw)
     return v.min(axis=0), v.max(axis=0)
@@ -105,7 +104,7 @@ def _solid_box(obj: SceneObject) -> tuple[np.ndarray, np.ndarray]:
 def _manifold(objects, i: int, made: dict):
     """Object i's solid as a manifold3d Manifold (made once per check, kept in ``made``)."""
     if i not in made:
-        import manifold3d
+        import manifold3d  # deferred: 18 ms to import
 
         m = object_solid(objects[i], 64)
         made[i] = manifold3d.Manifold(manifold3d.Mesh(

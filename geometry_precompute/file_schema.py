@@ -24,6 +24,14 @@ from .scene import (
     YAW_LIMIT,
 )
 from .settings import COORD_LIMIT, LENGTH_LIMIT, OLD_COLLISION, SPECS
+from .template_files import (
+    _PARAM_KEYS,
+    EXPR_LIMIT,
+    MAX_PARAMS,
+    MAX_TEMPLATES,
+    SHAPE_DIMS,
+    UNITS,
+)
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 
@@ -214,15 +222,6 @@ TEMPLATE_LOADER_ONLY = [
 
 def templates_schema() -> dict:
     """The JSON Schema of a template file (``geometry_precompute.template_files``)."""
-    from .template_files import (
-        _PARAM_KEYS,
-        EXPR_LIMIT,
-        MAX_PARAMS,
-        MAX_TEMPLATES,
-        OBJECT_KINDS,
-        SHAPE_DIMS,
-        UNITS,
-    )
 
     name = r"^(?!.*__)[a-z_][a-z0-9_]{0,63}$"
     expr = {"anyOf": [{"type": "number"},

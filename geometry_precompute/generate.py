@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -31,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import InputError, shown, unknown_field
+from .mesh_objects import load
 from .scene import Scene, SceneObject, Task
 from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
 from .template_files import BUILTIN_SET, TemplateSet, template_set
@@ -235,7 +237,6 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
             if not files:
                 raise bad(f"{w}.folder", f"no mesh files ({', '.join(MESH_SUFFIXES)}) in "
                           f"{shown(folder)}")
-            import zlib
 
             entry["files"] = files
             # Their content names them in cache keys and the sweep's hash: a file changed
@@ -264,7 +265,6 @@ def _pick(rng: np.random.Generator, weights) -> int:
 def _configured(rng: np.random.Generator, spec: dict, kind: str, n: int, seed: int,
                 preset: str, max_attempts: int, name: str | None) -> Scene:
     """A scene of the configured generator ``spec`` (``check_generator``'s)."""
-    from .mesh_objects import load
 
     half_x, half_y = spec["table"][0] / 2, spec["table"][1] / 2
     entries = spec["objects"]

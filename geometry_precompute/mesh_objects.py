@@ -23,6 +23,7 @@ where the geometry is built (interpenetration, pictures, MJCF).
 from __future__ import annotations
 
 import functools
+import io
 import math
 import os
 import warnings
@@ -73,9 +74,8 @@ def resolve(written: str, source: str) -> Path:
 @functools.lru_cache(maxsize=128)
 def _read(path: str, stamp: tuple[int, int]):
     """(digest, trimesh.Trimesh) of a mesh file, as read (cached per file and stamp)."""
-    import io
 
-    import trimesh
+    import trimesh  # deferred: 1.1 s to import
 
     data = Path(path).read_bytes()
     kind = Path(path).suffix.lower().lstrip(".")
@@ -147,7 +147,7 @@ def hull(info: MeshInfo) -> tuple[np.ndarray, np.ndarray]:
     (F, 3). Computed once per mesh file and scale (qhull, through trimesh)."""
     key = (info.digest, info.scale)
     if key not in _HULLS:
-        import trimesh
+        import trimesh  # deferred: 1.1 s to import
 
         assert info.vertices is not None  # load() keeps them
         h = trimesh.convex.convex_hull(info.vertices)
@@ -166,7 +166,7 @@ def solid(info: MeshInfo, position, yaw: float):
     """The object's solid (the mesh, or its convex hull) as a trimesh in the world frame:
     scaled, turned by ``yaw`` about the vertical axis through its origin, moved to
     ``position``."""
-    import trimesh
+    import trimesh  # deferred: 1.1 s to import
 
     return trimesh.Trimesh(placed(info, position, yaw), info.triangles, process=False)
 

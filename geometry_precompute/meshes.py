@@ -31,7 +31,7 @@ def _pose_matrix(shape: Shape) -> np.ndarray:
 def shape_manifold(shape: Shape, sections: int):
     """The shape as a ``manifold3d.Manifold`` (imported here, on first use: importing
     the package, as the JAX half does for the bake's schema, must not load it)."""
-    import manifold3d as m3
+    import manifold3d as m3  # deferred: 13 ms to import
 
     a, b, c = shape.dims
     k = area_preserving_scale(sections)
@@ -47,7 +47,7 @@ def shape_manifold(shape: Shape, sections: int):
 def manifold_to_trimesh(m):
     """The manifold as a ``trimesh.Trimesh`` (trimesh is imported here, on first use:
     the precompute itself needs only manifold3d)."""
-    import trimesh
+    import trimesh  # deferred: 1.4 s to import
 
     mesh = m.to_mesh64()
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3],

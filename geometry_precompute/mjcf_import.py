@@ -37,7 +37,7 @@ UPRIGHT_TOL = 1e-6  # |1 - z.z| of a geom's frame that still counts as upright
 
 
 def _model(xml: Path):
-    import mujoco
+    import mujoco  # deferred: 334 ms to import
 
     try:
         model = mujoco.MjModel.from_xml_path(str(xml))
@@ -158,7 +158,7 @@ def import_mjcf(xml: str | Path, mapping: Mapping[str, Any], mesh_dir: str | Pat
 
 def _write_mesh(model, g: int, rot: np.ndarray, folder: Path, oid: str) -> str:
     """Mesh geom ``g``'s vertices turned into the world's orientation, as an STL file."""
-    import trimesh
+    import trimesh  # deferred: 1.1 s to import
 
     m = model.geom_dataid[g]
     v0, nv = model.mesh_vertadr[m], model.mesh_vertnum[m]

@@ -27,7 +27,7 @@ from .errors import InputError, shown, unknown_field
 from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
 from .fileio import check_depth, write_atomic
 from .fileio import read_toml as read_toml  # its home before fileio.py
-from .mesh_objects import MeshInfo
+from .mesh_objects import MeshInfo, load
 from .settings import (
     COORD_LIMIT,
     DEFAULTS,
@@ -36,10 +36,9 @@ from .settings import (
     Settings,
     flatten_settings,
 )
-from .template_files import BUILTIN_SET, TemplateSet, template_set
+from .template_files import BUILTIN_SET, OBJECT_KINDS, TemplateSet, template_set
 from .template_files import builtin as builtin_templates
 
-OBJECT_KINDS = ("mug", "cup", "box", "mesh")
 # The built-in templates' names, fits, shrinkable parameters and fixed dimensions
 # (geometry_precompute/builtin_templates.toml); a scene's own files add to them.
 TEMPLATE_OBJECTS = {n: t.fits for n, t in builtin_templates().items()}
@@ -214,7 +213,6 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
                 raise InputError(src, where + key, f"not a field of a {kind} (mesh objects "
                                  "only)")
     if kind == "mesh":
-        from .mesh_objects import load
 
         for key in ("radius", "height", "half_extents"):
             if key in raw:

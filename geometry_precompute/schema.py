@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from .population import ARGS, MAX_VALUES, POPULATED
-from .settings import SPECS
 
 # Modes and outcomes (reference/model, statistics).
 MODES = ("baseline", "shrinking", "shacc")
@@ -67,6 +66,8 @@ def names(fields) -> tuple[str, ...]:
 def _stepped(field: str) -> bool:
     """Whether the setting whose field this is needs the stepped users' program above
     zero (``settings.Param.stepped``)."""
+    from .settings import SPECS  # the schema alone stays light (PARAMS, below)
+
     return any(s.param is not None and s.param.field == field and s.param.stepped
                for s in SPECS.values())
 
@@ -117,6 +118,8 @@ def _declared_params() -> tuple[Field, ...]:
     """Every rollout setting's field, in the order the settings are declared
     (``settings.SPECS``: each declares its own encoding, ``settings.Param``), then the
     populations' three fields, which encode a distribution for the POPULATED ones."""
+    from .settings import SPECS  # the schema alone stays light (PARAMS, below)
+
     fields = [Field(s.param.field, ("S",), s.param.dtype,
                     s.doc + (f", {s.unit}" if s.unit else "")
                     + ("" if s.param.field == s.name.replace(".", "_")
@@ -134,12 +137,26 @@ def _declared_params() -> tuple[Field, ...]:
                   "values of a list (zero after count)"))
 
 
-# Every rollout setting (derived from the settings' declarations) and the populations.
-PARAMS = _declared_params()
+# Derived from the settings' declarations when first read (module __getattr__ below), so
+# that importing the schema alone (the command line does, for the modes) stays light:
+# every rollout setting's field and the populations' (PARAMS); the fields that need the
+# stepped users' program above zero (USER: a setting's Param.stepped, and a population;
+# all zero and user_aim_object False is the perfect user's closed form); the collision
+# gripper's dimensions, in the order Params.gripper stacks them (GRIPPER).
+PARAMS: tuple[Field, ...]
+USER: tuple[str, ...]
+GRIPPER: tuple[str, ...]
 
-# A field above zero needs the stepped users' program (a setting's Param.stepped, and a
-# population); all zero (and user_aim_object False): the perfect user's closed form.
-USER = (*(f for f in names(PARAMS[:-3]) if _stepped(f)), "user_dist")
+
+def __getattr__(name: str):
+    if name not in ("PARAMS", "USER", "GRIPPER"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    params = _declared_params()
+    derived = {"PARAMS": params,
+               "USER": (*(f for f in names(params[:-3]) if _stepped(f)), "user_dist"),
+               "GRIPPER": tuple(f for f in names(params) if f.startswith("gripper_"))}
+    globals().update(derived)
+    return derived[name]
 
 SEARCH = (
     Field("q_mask", ("S", "T", "P"), "bool", "True for a real parameter of a real task"),
@@ -164,9 +181,6 @@ SEARCH = (
           "optimize_selection = validation (else the search's best on its own starts)"),
 )
 
-# The collision gripper's dimensions (the settings gripper.*), in the order Params.gripper
-# stacks them.
-GRIPPER = tuple(f for f in names(PARAMS) if f.startswith("gripper_"))
 
 
 def per_task(fields) -> frozenset[str]:
@@ -274,7 +288,8 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
     collide = bool(np.asarray(arrays.collision).any())
     boxes = collide and bool((np.asarray(arrays.obj_mask)
                               & (np.asarray(arrays.obj_kind) == BOX)).any())
-    stepped = any(bool((np.asarray(getattr(arrays, k)) > 0).any()) for k in USER)
+    stepped = any(bool((np.asarray(getattr(arrays, k)) > 0).any())
+                  for k in __getattr__("USER"))
     return Layout(
         n_tasks=arrays.task_mask.shape[-1], n_starts=arrays.starts.shape[-2],
         n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),

@@ -19,6 +19,8 @@ it changes:
 from __future__ import annotations
 
 import math
+import tomllib
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -384,7 +386,6 @@ OLD_COLLISION = "mjx"
 
 
 def _warn_once(message: str) -> None:
-    import warnings
 
     if message not in _WARNED:  # settings are validated again at every override
         _WARNED.add(message)
@@ -392,7 +393,6 @@ def _warn_once(message: str) -> None:
 
 
 def _warn_unit(spec: SettingSpec, value: Any, source: str, field: str) -> None:
-    import warnings
 
     text = None
     if spec.name == "omega_max" and value > OMEGA_LIMIT:
@@ -434,7 +434,6 @@ def parse_cli_value(name: str, text: str) -> Any:
     if spec.kind == "choice":
         return text
     if name in POPULATED and text.strip().startswith("{"):
-        import tomllib
         try:
             return tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError as e:

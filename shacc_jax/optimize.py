@@ -92,7 +92,9 @@ def _cma_es(population: int, solution: Array):
     C = I), and CPU LAPACK and GPU cuSOLVER choose differently, so the B D samples, and
     from then on the whole search, differed between devices. B D B^T is unique. The
     update (``tell``) already uses C^(-1/2) = B D^-1 B^T only."""
-    from evosax.algorithms import CMA_ES
+    from evosax.algorithms import CMA_ES  # deferred: 1.2 s to import
+
+    # deferred: importing it takes 761 ms
     from evosax.algorithms.distribution_based.cma_es import eigen_decomposition
 
     class SymmetricCMA_ES(CMA_ES):

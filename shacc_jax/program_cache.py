@@ -22,8 +22,10 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jaxlib
 from jax import export
 
+from geometry_precompute import schema
 from geometry_precompute.fileio import seal, unseal, write_atomic
 
 _DIR: Path | None = None
@@ -51,7 +53,6 @@ def forget_loaded() -> None:
 def _source_hash() -> str:
     global _SOURCE_HASH
     if _SOURCE_HASH is None:
-        from geometry_precompute import schema  # its codes are compiled into the program
 
         h = hashlib.sha256()
         for f in [*sorted(Path(__file__).parent.glob("*.py")), Path(schema.__file__)]:
@@ -65,7 +66,6 @@ def program_key(name: str, static: tuple, tree, leaves: list) -> str:
     and jaxlib versions, the backend, the flags that change a trace (x64, the stack
     frames kept in source locations), the static arguments and the arguments' tree,
     shapes and dtypes."""
-    import jaxlib
 
     flags: Any = jax.config  # its flags are attributes that type checkers do not see
     parts = [name, _source_hash(), jax.__version__, jaxlib.__version__,

@@ -55,6 +55,7 @@ from geometry_precompute.schema import (
 from . import program_cache
 from .evaluation import evaluate
 from .metrics import host_metrics
+from .optimize import optimized_spaces, search, search_sizes
 from .runtime import configure_runtime
 from .types import Evaluation, Geometry, Params, Rollouts, SceneMetrics, Search
 
@@ -488,7 +489,6 @@ def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         ev = execute(plan(baked, plain, points=points, **options), baked, points)
         parts.update({m: (ev, i) for i, m in enumerate(plain)})
     if OPTIMIZED in modes:
-        from .optimize import optimized_spaces, search, search_sizes
 
         if found is None:
             try:

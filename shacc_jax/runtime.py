@@ -26,6 +26,9 @@ import platform
 import warnings
 from dataclasses import dataclass
 
+import jax
+from jax._src import xla_bridge
+
 from . import determinism
 
 DEVICES_ENV = "JAX_NUM_CPU_DEVICES"
@@ -67,7 +70,6 @@ def cpu_devices(cores: int | None = None) -> int:
 
 
 def _started() -> bool:
-    from jax._src import xla_bridge
 
     return bool(xla_bridge.backends_are_initialized())
 
@@ -84,7 +86,6 @@ def configure_runtime() -> Runtime:
     global _RUNTIME
     if _RUNTIME is not None:
         return _RUNTIME
-    import jax
 
     flags = os.environ.get("XLA_FLAGS", "")
     pinned_flags, pinned = determinism.pinned_flags(flags, platform.machine())

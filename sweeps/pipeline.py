@@ -12,6 +12,8 @@ import numpy as np
 import shacc_jax
 from geometry_precompute import BakedScenes, PrecomputeResult
 from geometry_precompute.baking import bake
+from geometry_precompute.population import POPULATED
+from shacc_jax.optimize import winner_name
 from shacc_jax.types import OUTCOMES, Evaluation, Search
 from sweeps import compile_cache
 from sweeps.output import precompute_json, provenance
@@ -112,7 +114,6 @@ def scene_json(ev: Evaluated, s: int) -> dict:
     out["modes"] = modes
     user = ro.user
     if user is not None and user.shape[-1]:  # a population: each rollout's drawn values
-        from geometry_precompute.population import POPULATED
 
         out["users"] = {k: user[s, 0, :, :T, i].tolist() for i, k in enumerate(POPULATED)}
     for m, mode in enumerate(ev.modes):
@@ -171,7 +172,6 @@ def optimize_json(ev: Evaluated, s: int) -> dict:
     chosen, and success on the search's starts, on the validation starts and on the
     held-out grid (where those modes were evaluated) side by side, and which candidate
     won."""
-    from shacc_jax.optimize import winner_name
 
     f, st = ev.searched(), ev.results[s].settings
     held = {m: float(ev.evaluation.metrics.u_scene[s, i]) for i, m in enumerate(ev.modes)}

@@ -26,7 +26,7 @@ def _lazy_names() -> dict[str, str]:
     """geometry_precompute's names loaded on first use (PEP 562): name -> module."""
     import geometry_precompute
 
-    return {k: f"geometry_precompute.{v}" for k, v in geometry_precompute._WHERE.items()}
+    return {k: f"geometry_precompute.{v}" for k, v in geometry_precompute.LAZY_NAMES.items()}
 
 
 def import_graph() -> dict[str, set[str]]:

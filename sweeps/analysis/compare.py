@@ -66,7 +66,7 @@ def json_rows(objects: list[dict]) -> tuple[list[dict], list[dict]]:
 
 def read_scenes_table(path: Path):
     """A sweep folder's scenes table as a DataFrame; anything else is an InputError."""
-    import pandas as pd
+    import pandas as pd  # deferred: 871 ms to import
 
     try:
         return pd.read_parquet(path / "scenes")
@@ -75,7 +75,7 @@ def read_scenes_table(path: Path):
 
 
 def _load_sweep(path: Path) -> tuple[list[dict], list[dict]]:
-    import pandas as pd
+    import pandas as pd  # deferred: 871 ms to import
 
     frame = read_scenes_table(path)
     modes = [c.split(".")[0] for c in frame.columns if c.endswith(".success")]
@@ -122,7 +122,7 @@ def compare(a: str | Path, b: str | Path, n_boot: int = 10_000, seed: int = 0) -
     groups: dict[tuple, list] = {}
     for point, mode, key in ia:
         groups.setdefault((point, mode), []).append(key)
-    from geometry_precompute.schema import ALL_MODES
+    from geometry_precompute.schema import ALL_MODES  # deferred: 20 ms to import
 
     rows = []
     order = {m: i for i, m in enumerate(ALL_MODES)}

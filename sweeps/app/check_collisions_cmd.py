@@ -35,7 +35,7 @@ DEEP = 1e-3  # m: a missed penetration deeper than this is reported apart
 def _models(mjcf: str, dims: np.ndarray):
     """The scene's objects and the gripper's capsules as one MuJoCo model (the table and
     the spaces take no part), and the geoms of each."""
-    import mujoco
+    import mujoco  # deferred: 304 ms to import
 
     spec = mujoco.MjSpec.from_string(mjcf)
     hand = spec.worldbody.add_body(name="gripper", mocap=True)
@@ -71,20 +71,20 @@ def check(result, poses: int = 2000, seed: int = 0, spread: float = 0.06) -> dic
         >>> out["shacc"]["missed"], out["shacc"]["invented"]
         (0, 0)
     """
-    import jax
-    import jax.numpy as jnp
-    import mujoco
-    from scipy.spatial.transform import Rotation
+    import jax  # deferred: 1.4 s to import
+    import jax.numpy as jnp  # deferred: 1.6 s to import
+    import mujoco  # deferred: 304 ms to import
+    from scipy.spatial.transform import Rotation  # deferred: 753 ms to import
 
     with contextlib.redirect_stdout(io.StringIO()):  # it prints that MuJoCo Warp is absent
-        from mujoco import mjx
+        from mujoco import mjx  # deferred: 304 ms to import
 
-    import shacc_jax.collision as col
-    from geometry_precompute import bake
-    from geometry_precompute.mjcf import scene_to_mjcf
-    from shacc_jax.gripper import gripper_geoms
-    from shacc_jax.hulls import Hulls
-    from shacc_jax.types import Geometry, Params
+    import shacc_jax.collision as col  # deferred: 1.2 s to import
+    from geometry_precompute import bake  # deferred: 142 ms to import
+    from geometry_precompute.mjcf import scene_to_mjcf  # deferred: 127 ms to import
+    from shacc_jax.gripper import gripper_geoms  # deferred: 1.2 s to import
+    from shacc_jax.hulls import Hulls  # deferred: 1.5 s to import
+    from shacc_jax.types import Geometry, Params  # deferred: 1.8 s to import
 
     if not result.scene.objects:
         raise InputError(result.scene.source, "objects", "the scene has no object to check")
@@ -158,7 +158,7 @@ def check(result, poses: int = 2000, seed: int = 0, spread: float = 0.06) -> dic
 
 
 def cmd_check_collisions(args) -> int:
-    from sweeps.app.inputs import load_and_precompute
+    from sweeps.app.inputs import load_and_precompute  # deferred: 106 ms to import
 
     out = check(load_and_precompute(args.scene, args.set), args.poses, args.seed)
     if args.json:

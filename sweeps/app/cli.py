@@ -28,7 +28,7 @@ def modes() -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The modes a command may be asked for, and the paper's three (the schema's, read
     without importing JAX); `evaluate` runs the paper's three unless asked: the
     optimized mode searches first."""
-    from geometry_precompute.schema import ALL_MODES, MODES
+    from geometry_precompute.schema import ALL_MODES, MODES  # deferred: 35 ms to import
 
     return ALL_MODES, MODES
 
@@ -88,7 +88,7 @@ def _path(text: str) -> str:
 
 
 def _version() -> str:
-    import importlib.metadata as md
+    import importlib.metadata as md  # deferred: 57 ms to import
 
     try:
         return md.version("shacc")
@@ -258,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     """A scene's warnings as one line each on stderr (Python's form adds a source line)."""
-    from geometry_precompute.scene import SceneWarning
+    from geometry_precompute.scene import SceneWarning  # deferred: 285 ms to import
 
     if issubclass(category, SceneWarning):
         print(f"warning: {message}", file=sys.stderr)
@@ -273,11 +273,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status. Every fault ends in one line on
     stderr (``faults.report``): bad input 2, a fault of the machine 1, Ctrl-C 130, a
     bug of ours 70 (``SHACC_DEBUG=1`` shows the traceback of any of them)."""
+    # deferred: importing it takes 9 ms
     from sweeps.distributed.faults import GuardedStdout, guard_standard_streams
 
     guard_standard_streams()
     argv = sys.argv[1:] if argv is None else list(argv)
-    from sweeps.output import record_command
+    from sweeps.output import record_command  # deferred: 312 ms to import
 
     record_command(argv)
     stdout = sys.stdout
@@ -287,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as e:  # argparse: --help, --version, bad arguments
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
     except BaseException as e:
-        from sweeps.distributed.faults import report
+        from sweeps.distributed.faults import report  # deferred: 9 ms to import
 
         return report(e)
     finally:
@@ -298,27 +299,27 @@ def _run(argv: list[str]) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)  # imports neither NumPy nor dask
     if isinstance(getattr(args, "json", None), str):  # --json /dev/stdout is --json -
-        from sweeps.output import stdout_alias
+        from sweeps.output import stdout_alias  # deferred: 312 ms to import
 
         args.json = stdout_alias(args.json)
     if args.command == "sweep" and not (args.dry_run or args.scheduler):
         # Before this process imports NumPy, dask and the rest: the local cluster's fork
         # server imports the workers' modules meanwhile (a config that names a scheduler
         # leaves the server unused; it ends with this process).
-        from sweeps.distributed.cluster import start_fork_server
+        from sweeps.distributed.cluster import start_fork_server  # deferred: 46 ms to import
 
         start_fork_server()
     # The sweep's evaluation workers turn the cache on for themselves; its client
     # process never loads JAX.
     if args.command in ("evaluate", "optimize", "reproduce", "render"):
-        from shacc_jax import configure_runtime
+        from shacc_jax import configure_runtime  # deferred: 2.2 s to import
 
         configure_runtime()  # before anything starts JAX (shacc_jax/runtime.py)
         compile_cache.enable()
     module, name = args.func.split(":")
     func = getattr(importlib.import_module(f"{__package__}.{module}"), name)
     status = func(args)
-    from sweeps.distributed.faults import flush_stdout
+    from sweeps.distributed.faults import flush_stdout  # deferred: 9 ms to import
 
     flush_stdout()
     return status

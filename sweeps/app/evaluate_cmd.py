@@ -12,12 +12,14 @@ import json
 import time
 from pathlib import Path
 
+import shacc_jax
 from geometry_precompute import InputError
+from geometry_precompute.baking import bake
 from geometry_precompute.loading import scene_files as folder_scene_files
 from shacc_jax.types import OUTCOMES
 from sweeps.app.inputs import load_and_precompute
 from sweeps.output import announce, check_output_file, clean_json, human_output, write_output
-from sweeps.pipeline import evaluate_results, scene_json
+from sweeps.pipeline import evaluate_results, scene_json, tasks_json
 
 
 def scene_files(args: list[str]) -> list[Path]:
@@ -80,7 +82,6 @@ def print_table(ev, scenes: list[int], with_scene: bool = True) -> None:
 
 def print_tasks(ev, s: int, with_scene: bool = False) -> None:
     """Scene ``s`` per task: per mode its success rate and outcome counts."""
-    from sweeps.pipeline import tasks_json
 
     r = ev.results[s]
     k = _outcome_columns([r])
@@ -100,8 +101,6 @@ def print_tasks(ev, s: int, with_scene: bool = False) -> None:
 
 def print_plan(results, modes) -> int:
     """``shacc evaluate --plan``: the RunPlan of the batch, nothing evaluated."""
-    import shacc_jax
-    from geometry_precompute.baking import bake
 
     baked = bake(results)
     plain = [m for m in modes if m != "optimized"]

@@ -12,13 +12,16 @@ import sys
 import tempfile
 from pathlib import Path
 
-from geometry_precompute import InputError
+import tomli_w
+
+from geometry_precompute import InputError, load_scene, precompute
 from geometry_precompute.errors import HostError
+from geometry_precompute.fileio import read_toml, write_atomic
+from geometry_precompute.mjcf_import import import_mjcf
 from sweeps.output import check_output_file, nearest_existing
 
 
 def _mapping(args) -> tuple[dict, str]:
-    from geometry_precompute.fileio import read_toml
 
     mapping: dict = read_toml(args.map, "a task mapping (TOML)") if args.map else {}
     src = str(args.map) if args.map else "<arguments>"
@@ -35,9 +38,6 @@ def _mapping(args) -> tuple[dict, str]:
 
 
 def cmd_import_mjcf(args) -> int:
-    from geometry_precompute import load_scene, precompute
-    from geometry_precompute.fileio import write_atomic
-    from geometry_precompute.mjcf_import import import_mjcf
 
     out = Path(args.out)
     if out.suffix != ".toml":
@@ -53,7 +53,6 @@ def cmd_import_mjcf(args) -> int:
     except OSError as e:
         raise HostError(base, "make a working folder", e.strerror or str(e)) from None
     try:
-        import tomli_w
 
         table = import_mjcf(args.xml, mapping, work, src)
         scene_file = work / out.name

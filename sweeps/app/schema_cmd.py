@@ -7,7 +7,13 @@ from __future__ import annotations
 
 import json
 
-from geometry_precompute.file_schema import DRAFT, _vector, settings_schema
+from geometry_precompute.file_schema import (
+    DRAFT,
+    _vector,
+    scene_schema,
+    settings_schema,
+    templates_schema,
+)
 from geometry_precompute.generate import GENERATOR_KINDS, MAX_TASKS, PRESETS
 from geometry_precompute.schema import ALL_MODES
 from geometry_precompute.settings import INT32_MAX
@@ -94,7 +100,6 @@ def sweep_schema() -> dict:
 
 
 def cmd_schema(args) -> int:
-    from geometry_precompute.file_schema import scene_schema, templates_schema
 
     schema = {"scene": scene_schema, "sweep": sweep_schema,
               "templates": templates_schema}[args.kind]()

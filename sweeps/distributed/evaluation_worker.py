@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import os
+import platform
 import socket
 import threading
 import time
@@ -24,7 +25,13 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from geometry_precompute import precompute, random_scene
 from geometry_precompute.baking import concatenate
+from geometry_precompute.batch import bake_batch, point_settings
+from geometry_precompute.outcomes import scene_metrics
+from geometry_precompute.population import POPULATED
+from geometry_precompute.scene import Scene
+from sweeps import compile_cache
 from sweeps.analysis import tables
 from sweeps.distributed.kinds import PLUGIN
 from sweeps.distributed.plan import Chunk, Shapes
@@ -73,12 +80,11 @@ def _setup() -> None:
     with _LOCK:
         if _READY:
             return
-        from shacc_jax import configure_runtime
+        from shacc_jax import configure_runtime  # deferred: 1.8 s to import
 
         configure_runtime()  # before this worker starts JAX (shacc_jax/runtime.py)
-        from jax import monitoring
+        from jax import monitoring  # deferred: 1.8 s to import
 
-        from sweeps import compile_cache
 
         compile_cache.enable()
 
@@ -132,7 +138,7 @@ class EarlyWarmUp:
 def early_warm_up() -> EarlyWarmUp | None:
     """The warm-up this worker began as it started (``worker_setup.WorkerSetup``), handed
     out once; None outside a worker, on a worker without one, or once taken."""
-    from distributed import get_worker
+    from distributed import get_worker  # deferred: 1.1 s to import
 
     try:
         worker = get_worker()
@@ -169,11 +175,10 @@ WARM_UP_MARKS: dict[str, float] = {}
 @functools.cache
 def _provenance() -> dict:
     """What evaluated a chunk: software versions and the device, recorded in its parts."""
-    import importlib.metadata as md
-    import platform
+    import importlib.metadata as md  # deferred: 53 ms to import
 
-    import jax
-    import jaxlib
+    import jax  # deferred: 1.8 s to import
+    import jaxlib  # deferred: 10 ms to import
 
     try:
         shacc = md.version("shacc")
@@ -189,11 +194,8 @@ def _provenance() -> dict:
 def _warm_up(job: ChunkJob, ref) -> dict:
     WARM_UP_MARKS.clear()
     WARM_UP_MARKS["begun"] = time.time()
-    import jax
+    import jax  # deferred: 1.8 s to import
 
-    from geometry_precompute import precompute, random_scene
-    from geometry_precompute.batch import bake_batch, point_settings
-    from geometry_precompute.scene import Scene
 
     WARM_UP_MARKS["imports"] = time.time()
     _setup()
@@ -263,9 +265,9 @@ def _evaluate(bakes: list, modes, populations: bool = False) -> list[tuple]:
     ``shacc_jax.run`` with a points axis. Only the COMPACT fields come back, and no
     per-scene metrics: encode_chunk computes them on a CPU worker, off this worker's
     path (8 ms a 1 000-scene chunk)."""
-    import jax
+    import jax  # deferred: 1.8 s to import
 
-    import shacc_jax
+    import shacc_jax  # deferred: 1.8 s to import
 
     fields = tuple(COMPACT) + (("user",) if populations else ())
     if len(bakes) == 1:  # no points axis to add and take off again
@@ -282,7 +284,6 @@ def _drawn(user: np.ndarray, b, S: int) -> np.ndarray:
     """The user settings each rollout drew, (S, M, N, T, 4) float32: the evaluation's
     where its points had a population, else each scene's plain values (a sweep whose
     other points have a population keeps one set of columns)."""
-    from geometry_precompute.population import POPULATED
 
     if user.shape[-1] == len(POPULATED):
         return user.astype(np.float32)
@@ -320,7 +321,6 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
     """A chunk's two Parquet parts from its evaluation (a CPU worker's task: the tables
     of many chunks are made in parallel, not one after another on the accelerator's
     worker)."""
-    from geometry_precompute.outcomes import scene_metrics
 
     t0 = time.perf_counter()
     parts: dict[str, list] = {name: [] for name in tables.TABLES}

@@ -40,7 +40,7 @@ def _say(line: str) -> None:
 
 def report(error: BaseException) -> int:
     """Print ``error`` as its one line (module docstring) and return the exit status."""
-    from sweeps.distributed.cluster import ClusterLost
+    from sweeps.distributed.cluster import ClusterLost  # deferred: 64 ms to import
 
     if os.environ.get(DEBUG_ENV, "").strip() not in ("", "0"):
         traceback.print_exception(error, file=sys.stderr)
