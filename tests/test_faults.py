@@ -226,7 +226,7 @@ def test_ctrl_c_while_the_file_writer_is_half_imported():
     its first lines."""
     res = ctrl_c_during_import("name == 'geometry_precompute.errors' and "
                                "'geometry_precompute.fileio' in sys.modules",
-                               "from sweeps import interrupt\n"
+                               "from sweeps.distributed import interrupt\n"
                                "interrupt.install()\n"
                                "sys.meta_path.insert(0, Finder())\n"
                                "import geometry_precompute.fileio\n"
