@@ -1,7 +1,7 @@
 """Memory one rollout needs during evaluation, for the memory model of ``shacc_jax/runplan.py``.
 
     python benchmarks/bench_memory.py --bake bake.npz --scenes 1000 [--collision]
-        [--user NOISE LAG TREMOR]
+        [--user NAME=VALUE ...]
 
 (the bake from ``bench_rollouts.py bake``). Prints XLA's memory analysis of the
 compiled program (temporaries, outputs, arguments) and, where the device reports it,
@@ -15,7 +15,7 @@ import argparse
 import json
 
 import jax
-from bench_rollouts import _load
+from bench_rollouts import _load, user_setting
 
 import shacc_jax
 
@@ -25,8 +25,9 @@ def main() -> None:
     ap.add_argument("--bake", required=True)
     ap.add_argument("--scenes", type=int, default=1000)
     ap.add_argument("--collision", action="store_true")
-    ap.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
-                    help="an imperfect simulated user in every scene (the stepped program)")
+    ap.add_argument("--user", type=user_setting, nargs="+", metavar="NAME=VALUE",
+                    help="an imperfect simulated user in every scene (the stepped program), "
+                    "e.g. user_noise=0.3 user_noise_tau=0.5")
     args = ap.parse_args()
     geometry, params, layout = _load(args.bake, args.scenes, args.collision, user=args.user)
     f = jax.jit(shacc_jax.evaluate, static_argnames="layout")

@@ -95,13 +95,27 @@ def cmd_bake(args) -> None:
           f"wrote {args.out}")
 
 
+def user_setting(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` of a simulated user's baked parameter (``user_noise=0.3``,
+    ``user_input_modes=1``), for ``--user``."""
+    name, _, value = text.partition("=")
+    known = [f.name for f in schema.PARAMS if f.name.startswith("user_") and f.shape == ("S",)]
+    if name not in known or not value:
+        raise argparse.ArgumentTypeError(f"--user takes NAME=VALUE, NAME one of "
+                                         f"{', '.join(known)}; got {text!r}")
+    return name, float(value)
+
+
 def _load_bake(path: str, n: int, collision: bool = False, user=None,
                population: bool = False):
     """The first n scenes of a bake file (repeated if it holds fewer), as an object with
-    the bake's arrays as attributes; ``user``: (user_noise, user_lag, user_tremor) for
-    every scene (an imperfect simulated user, stepped); with ``population`` each of the
-    three drawn per rollout, uniform on [0, twice the value] (the same means)."""
+    the bake's arrays as attributes; ``user``: [(name, value)] user parameters set in
+    every scene (an imperfect simulated user, stepped); with ``population`` each of them
+    that a population may draw is drawn per rollout, uniform on [0, twice the value]
+    (the same mean)."""
     from types import SimpleNamespace
+
+    from geometry_precompute.population import POPULATED
 
     data = np.load(path)
     missing = [k for k in FIELDS if k not in data]
@@ -110,17 +124,20 @@ def _load_bake(path: str, n: int, collision: bool = False, user=None,
     total = data["task_mask"].shape[0]
     reps = -(-n // total)
     arrays = {}
+    given = dict(user or [])
     for k in FIELDS:
         a = data[k]
         if k == "collision":
             a = np.full_like(a, collision)
-        if user is not None and k in schema.USER[:3]:
-            a = np.full_like(a, user[schema.USER.index(k)])
+        if k in given:
+            a = np.full_like(a, given[k])
         arrays[k] = np.concatenate([a] * reps)[:n] if reps > 1 else a[:n]
-    if population and user is not None:
-        for i, value in enumerate(user):
-            arrays["user_dist"][:, i] = 1  # uniform
-            arrays["user_dist_args"][:, i] = [0.0, 2 * value, 0.0, 2 * value]
+    if population:
+        for name, value in given.items():
+            if name in POPULATED:
+                i = POPULATED.index(name)
+                arrays["user_dist"][:, i] = 1  # uniform
+                arrays["user_dist_args"][:, i] = [0.0, 2 * value, 0.0, 2 * value]
     return SimpleNamespace(**arrays)
 
 
@@ -363,8 +380,9 @@ def main() -> None:
                    "plan's default)")
     r.add_argument("--collision", action="store_true",
                    help='collision = "on" for every scene (the bake holds the objects)')
-    r.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"),
-                   help="an imperfect simulated user in every scene (stepped rollouts)")
+    r.add_argument("--user", type=user_setting, nargs="+", metavar="NAME=VALUE",
+                   help="an imperfect simulated user in every scene (stepped rollouts), "
+                   "e.g. user_noise=0.3 user_noise_tau=0.5 user_tremor=0.01")
     r.add_argument("--population", action="store_true",
                    help="with --user: each rollout draws its user, uniform on [0, 2 x]")
     r.add_argument("--stepping", type=int, nargs=2, metavar=("SHARE", "UNROLL"),
@@ -377,7 +395,7 @@ def main() -> None:
     k.add_argument("--scenes", type=int, default=10000)
     k.add_argument("--modes", nargs="+", default=["baseline", "shrinking", "shacc"])
     k.add_argument("--block", type=int, default=None)
-    k.add_argument("--user", type=float, nargs=3, metavar=("NOISE", "LAG", "TREMOR"))
+    k.add_argument("--user", type=user_setting, nargs="+", metavar="NAME=VALUE")
     k.set_defaults(func=cmd_kernels)
     q = sub.add_parser("points")
     q.add_argument("--bake", required=True)

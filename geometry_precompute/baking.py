@@ -88,9 +88,13 @@ class BakedScenes:
     user_seed: np.ndarray
     collision: np.ndarray
     user_noise: np.ndarray
-    user_lag: np.ndarray
+    user_noise_tau: np.ndarray
     user_tremor: np.ndarray
     user_tremor_hz: np.ndarray
+    user_input_modes: np.ndarray
+    user_mode_switch_s: np.ndarray
+    user_switch: np.ndarray
+    user_switch_at: np.ndarray
     user_aim_object: np.ndarray
     activation_swept: np.ndarray
     gripper_finger_length: np.ndarray

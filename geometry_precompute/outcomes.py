@@ -14,11 +14,18 @@ import numpy as np
 from .schema import OUTCOMES, SUCCESS
 
 
-def scene_metrics(outcome, delta_r, task_mask) -> tuple[np.ndarray, ...]:
+def scene_metrics(outcome, delta_r, task_mask, step=None, path_length=None, assist=None,
+                  dt=None) -> tuple[np.ndarray, ...]:
     """(u_scene, delta_R_mean, outcome_counts, n_rollouts) of rollouts (*lead, S, M, N, T)
     (``*lead``: e.g. a points axis) with ``task_mask`` (S, T): u_scene float64,
     delta_R_mean float64 (NaN where a scene and mode has no success), outcome_counts
-    (*lead, S, M, 5) and n_rollouts (*lead, S, M) int64. Padded tasks count nowhere."""
+    (*lead, S, M, 5) and n_rollouts (*lead, S, M) int64. Padded tasks count nowhere.
+
+    Given the rollouts' ``step``, ``path_length``, ``assist`` (..., 4) and the scenes'
+    ``dt`` (*lead, S), also (time_mean, path_length_mean, assist_fraction): the means
+    over successes of the time to activation (step dt, s) and of the path length (m),
+    NaN without a success, and the fraction of all the rollouts' steps under each kind
+    of assistance (*lead, S, M, 4), NaN where no rollout took a step."""
     outcome = np.asarray(outcome)
     valid = np.broadcast_to(np.asarray(task_mask, bool)[:, None, None, :], outcome.shape)
     counts = np.stack([np.sum(valid & (outcome == c), axis=(-2, -1))
@@ -30,4 +37,18 @@ def scene_metrics(outcome, delta_r, task_mask) -> tuple[np.ndarray, ...]:
     with np.errstate(invalid="ignore", divide="ignore"):
         u = n_success / np.maximum(n, 1)
         mean = np.where(n_success > 0, total / np.maximum(n_success, 1), np.nan)
-    return u.astype(np.float64), mean, counts, n
+    if step is None:
+        return u.astype(np.float64), mean, counts, n
+    steps = np.where(valid, np.asarray(step, np.int64), 0)
+    dt = np.asarray(dt, np.float64)[..., :, None]  # (*lead, S, 1): over the modes
+    length = np.where(success, np.asarray(path_length, np.float64), 0.0)
+    assist = np.where(valid[..., None], np.asarray(assist, np.int64), 0)
+    taken = np.sum(assist, axis=(-3, -2)).astype(np.float64)  # (*lead, S, M, 4)
+    all_steps = taken.sum(axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        time_mean = np.where(n_success > 0, np.sum(np.where(success, steps, 0), axis=(-2, -1))
+                             * dt / np.maximum(n_success, 1), np.nan)
+        path_mean = np.where(n_success > 0, np.sum(length, axis=(-2, -1))
+                             / np.maximum(n_success, 1), np.nan)
+        fraction = np.where(all_steps > 0, taken / np.maximum(all_steps, 1), np.nan)
+    return u.astype(np.float64), mean, counts, n, time_mean, path_mean, fraction

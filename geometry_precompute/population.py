@@ -4,7 +4,7 @@ place of a number for a numeric user setting, drawn once per rollout.
 A population setting is a table with one key::
 
     user_noise = {uniform = [0.0, 0.4]}       # uniform on [low, high]
-    user_lag = {normal = [0.2, 0.1]}          # N(mean, sd^2) truncated to the setting's range
+    user_switch = {normal = [0.2, 0.1]}       # N(mean, sd^2) truncated to the setting's range
     user_tremor = {values = [0.0, 0.01, 0.02]}  # one of the values, each as likely
 
 Each rollout draws its own value from the counter-based stream that keys its other random
@@ -26,7 +26,8 @@ from typing import Any
 from .errors import InputError, shown
 
 # The numeric user settings that take a population, in the order of the bake's arrays.
-POPULATED = ("user_noise", "user_lag", "user_tremor", "user_tremor_hz")
+POPULATED = ("user_noise", "user_noise_tau", "user_tremor", "user_tremor_hz", "user_switch",
+             "user_switch_at", "user_mode_switch_s")
 DISTRIBUTIONS = ("uniform", "normal", "values")
 # Codes in the bake (``user_dist``): 0 is a plain number (the setting's own leaf).
 FIXED, UNIFORM, NORMAL, VALUES = range(4)

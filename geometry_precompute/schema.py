@@ -35,6 +35,10 @@ OPTIMIZED = "optimized"
 ALL_MODES = (*MODES, OPTIMIZED)
 OUTCOMES = ("success", "wrong", "ambiguous", "timeout", "collision")
 SUCCESS, WRONG, AMBIGUOUS, TIMEOUT, COLLISION = range(5)
+# The kinds of assistance a step is taken under (the pilot study's, reference/model): no
+# orientation target, the meta skill's cluster average, towards the intended task,
+# towards another task.
+ASSISTANCE = ("none", "scene", "correct", "wrong")
 INVALID = -1  # the rollout's intended task is a padded (masked) task
 
 # Shape kinds, for task spaces and for objects alike (objects are cylinders or boxes).
@@ -127,7 +131,7 @@ def _declared_params() -> tuple[Field, ...]:
               for s in SPECS.values() if s.param is not None]
     return (*fields,
             Field("user_dist", ("S", len(POPULATED)), "int", "per populated user setting "
-                  "(POPULATED: user_noise, user_lag, user_tremor, user_tremor_hz) its "
+                  "(POPULATED) its "
                   "distribution: 0 the plain value, 1 uniform, 2 truncated normal, 3 a "
                   "list of values"),
             Field("user_dist_args", ("S", len(POPULATED), ARGS), "float", "uniform: (low, "
@@ -228,7 +232,12 @@ class Layout:
     above zero): the program then steps every rollout (``shacc_jax.stepping``) instead of
     the perfect user's closed form. ``populations``: whether some scene's user settings
     are a population (``user_dist`` above zero): each rollout then draws its own, and the
-    rollouts carry the drawn values (``Rollouts.user``). ``swept_checks``: whether some scene checks
+    rollouts carry the drawn values (``Rollouts.user``). ``switching``: whether some
+    scene's user may change its mind (``user_switch`` above zero, or drawn): only then
+    does the stepped program find, each step, the closest point of the task first
+    headed for. ``joystick``: whether some scene's user has the two-mode joystick
+    (``user_input`` modes): only then do the lanes carry a mode and a pause.
+    ``swept_checks``: whether some scene checks
     activation along each step's segment (``activation_check`` swept): only then does
     the stepped program trace that check. ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
@@ -249,6 +258,8 @@ class Layout:
     box_objects: bool = False
     stepped_users: bool = False
     populations: bool = False
+    switching: bool = False
+    joystick: bool = False
     swept_checks: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
@@ -296,6 +307,10 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
         meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
         collision_checks=collide, box_objects=boxes, stepped_users=stepped,
         populations=bool((np.asarray(arrays.user_dist) > 0).any()),
+        joystick=bool(np.asarray(arrays.user_input_modes).any()),
+        switching=bool((np.asarray(arrays.user_switch) > 0).any()
+                       or (np.asarray(arrays.user_dist)[..., POPULATED.index("user_switch")]
+                           > 0).any()),
         swept_checks=bool(np.asarray(arrays.activation_swept).any()),
         lanes_per_block=lanes_per_block,
         samples_per_block=samples_per_block)

@@ -155,12 +155,20 @@ _SPECS: list[SettingSpec] = [
     # perfect user. Angles in rad, lengths in m; the ranges catch degrees and centimetres.
     _spec("user_noise", 0.0, "float", "rollout", _range(0, math.pi / 2), unit="rad",
           param=Param("user_noise", "float", stepped=True)),
-    _spec("user_lag", 0.0, "float", "rollout", _range(0, 1, hi_open=True),
-          param=Param("user_lag", "float", stepped=True)),
+    _spec("user_noise_tau", 0.0, "float", "rollout", _range(0, 100), unit="s",
+          param=Param("user_noise_tau", "float")),
     _spec("user_tremor", 0.0, "float", "rollout", _range(0, 0.05), unit="m",
           param=Param("user_tremor", "float", stepped=True)),
     _spec("user_tremor_hz", 5.0, "float", "rollout", _range(0, 50, lo_open=True), unit="Hz",
           param=Param("user_tremor_hz", "float")),
+    _spec("user_input", "3d", "choice", "rollout", _choice("3d", "modes"), ("3d", "modes"),
+          param=Param("user_input_modes", "bool", lambda v: v == "modes", stepped=True)),
+    _spec("user_mode_switch_s", 0.5, "float", "rollout", _range(0, 60), unit="s",
+          param=Param("user_mode_switch_s", "float")),
+    _spec("user_switch", 0.0, "float", "rollout", _range(0, 1),
+          param=Param("user_switch", "float", stepped=True)),
+    _spec("user_switch_at", 0.5, "float", "rollout", _range(0, 1, lo_open=True, hi_open=True),
+          param=Param("user_switch_at", "float")),
     _spec("user_aim", "space", "choice", "rollout", _choice("space", "object"),
           ("space", "object"),
           param=Param("user_aim_object", "bool", lambda v: v == "object", stepped=True)),
@@ -233,9 +241,19 @@ _DOCS = {
             "numbers",
     "collision": "gripper collision checking: off, or on (exact capsule checks against "
                  "cylinders and boxes, as MuJoCo's; \"mjx\", its old name, still works)",
-    "user_noise": "simulated user: each step's direction turned by |N(0, user_noise^2)| "
-                  "about a random axis across it",
-    "user_lag": "simulated user: probability that a step repeats the previous one",
+    "user_noise": "simulated user, a wandering hand: each step's direction turned by the "
+                  "part across it of a rotation vector of N(0, user_noise^2) components",
+    "user_noise_tau": "simulated user: the wandering hand's correlation time (an "
+                      "Ornstein-Uhlenbeck process; 0: white noise, a new vector every step)",
+    "user_input": "simulated user's input device: 3d (the whole displacement at once) or "
+                  "modes (a two-mode joystick: horizontal plane or vertical, one at a time)",
+    "user_mode_switch_s": "simulated user, modes: the time a switch of mode costs, without "
+                          "motion",
+    "user_switch": "simulated user, a change of mind: the probability that a rollout first "
+                   "heads for another task of the scene",
+    "user_switch_at": "simulated user, a change of mind: the user turns to its task once the "
+                      "distance to the first task's space has fallen to (1 - this) of its "
+                      "value at the start",
     "user_tremor": "simulated user: amplitude of a tremor of the gripper about the "
                    "commanded position, along a random axis",
     "user_tremor_hz": "simulated user: the tremor's frequency",
@@ -285,10 +303,10 @@ SPECS: Mapping[str, SettingSpec] = MappingProxyType({s.name: s for s in _SPECS})
 def population_range(name: str) -> tuple[float, float]:
     """The closed range that draws of a population of ``name`` (of ``POPULATED``) keep
     to: the setting's range, an open end moved inside by a millionth of its width (a
-    drawn ``user_lag`` stays below 1). The truncated normal is truncated to it.
+    drawn ``user_switch_at`` stays inside (0, 1)). The truncated normal is truncated to it.
 
-    >>> population_range("user_lag")
-    (0, 0.999999)
+    >>> population_range("user_switch_at")
+    (1e-06, 0.999999)
     """
     sch = SPECS[name].schema
     lo = sch.get("minimum", sch.get("exclusiveMinimum"))
@@ -311,6 +329,44 @@ def describe() -> list[dict[str, str]]:
                      "type": kind + (" or population" if s.name in POPULATED else ""),
                      "unit": s.unit, "rule": s.rule, "stage": s.stage, "meaning": s.doc})
     return rows
+
+def describe_user(settings: Mapping[str, Any]) -> str:
+    """The simulated user a scene's settings give, in words (``shacc evaluate`` prints
+    it): "perfect" for the paper's Automaton, else each imperfection, a population as
+    its distribution.
+
+    >>> describe_user(Settings())
+    "perfect (the paper's Automaton: straight to the task's space)"
+    >>> describe_user(Settings().with_overrides({"user_noise": 0.2, "user_noise_tau": 0.5}))
+    'wandering hand 0.2 rad (correlation time 0.5 s)'
+    """
+    def text(name: str) -> str:
+        v = settings[name]
+        return v.text() if isinstance(v, Population) else f"{v:g}"
+
+    def on(name: str) -> bool:
+        v = settings[name]
+        return isinstance(v, Population) or v > 0
+
+    parts = []
+    if on("user_noise"):
+        tau = settings["user_noise_tau"]
+        kind = "white noise" if not isinstance(tau, Population) and tau == 0 else \
+            f"correlation time {text('user_noise_tau')} s"
+        parts.append(f"wandering hand {text('user_noise')} rad ({kind})")
+    if on("user_tremor"):
+        parts.append(f"tremor {text('user_tremor')} m at {text('user_tremor_hz')} Hz")
+    if settings["user_input"] == "modes":
+        parts.append(f"two-mode joystick ({text('user_mode_switch_s')} s a switch)")
+    if on("user_switch"):
+        parts.append(f"change of mind with probability {text('user_switch')}, turning at "
+                     f"{text('user_switch_at')} of the way")
+    if settings["user_aim"] == "object":
+        parts.append("aims at the object")
+    if settings["activation_check"] == "swept":
+        parts.append("swept activation check")
+    return "; ".join(parts) or "perfect (the paper's Automaton: straight to the task's space)"
+
 
 # Object dimensions (reference/scenes): per-object fields of a scene file, not settings,
 # but defaults all the same, so they live here too.
@@ -385,6 +441,21 @@ TEMPLATE_LENGTH_LIMIT = 1.0  # m: a template size above this looks like centimet
 OLD_COLLISION = "mjx"
 
 
+# Settings that no longer exist, with why and what replaces them: naming one anywhere (a
+# scene, a sweep config, --set, a population) is a one-line error.
+WITHDRAWN = {
+    "user_lag": "withdrawn: repeating the previous step is the same step for a user who moves "
+                "in a straight line, so it changed nothing; use user_noise with "
+                "user_noise_tau (a wandering hand), user_input = \"modes\" (a two-mode "
+                "joystick) or user_switch (a change of mind)",
+}
+
+
+def _unknown(name: str) -> str:
+    """The rule for a name that is no setting."""
+    return WITHDRAWN.get(name, "unknown setting (`shacc settings` lists them)")
+
+
 def _warn_once(message: str) -> None:
 
     if message not in _WARNED:  # settings are validated again at every override
@@ -429,6 +500,8 @@ def _cli_number(name: str, text: str) -> int | float:
 def parse_cli_value(name: str, text: str) -> Any:
     """Parse the text of ``--set NAME=VALUE`` by the setting's kind."""
     spec = SPECS.get(name)
+    if spec is None and name in WITHDRAWN:
+        raise InputError("<--set>", name, WITHDRAWN[name])
     if spec is None:
         raise InputError("<--set>", name, f"unknown setting; known: {', '.join(SPECS)}")
     if spec.kind == "choice":
@@ -464,7 +537,8 @@ def flatten_settings(table: Mapping[str, Any], source: str = "<settings>",
     def walk(t: Mapping[str, Any], stem: str) -> None:
         for key, value in t.items():
             name = f"{stem}{key}"
-            if isinstance(value, Mapping) and name not in POPULATED:  # a population stays
+            if isinstance(value, Mapping) and name not in POPULATED and name not in WITHDRAWN:
+                # a population stays whole (and a withdrawn name is reported as itself)
                 walk(value, name + ".")
             elif name in out:
                 raise InputError(source, prefix + name, "given twice (once quoted, once as a "
@@ -510,8 +584,7 @@ class Settings(Mapping[str, Any]):
         for name, value in flatten_settings(overrides, source, prefix).items():
             spec = SPECS.get(name)
             if spec is None:
-                raise InputError(source, prefix + name,
-                                 "unknown setting (`shacc settings` lists them)")
+                raise InputError(source, prefix + name, _unknown(name))
             new[name] = _coerce(spec, value, source, prefix + name)
         if new["collision"] != "off" and new["activation_check"] != "steps":
             # A swept step may enter a space part-way: which comes first, that entry or

@@ -1,19 +1,22 @@
 # %% [markdown]
-# # Imperfect users: where does a noisy, trembling user still reach each task?
+# # Imperfect users: where does a wandering, trembling user still reach each task?
 #
 # The paper's Automaton is one perfect user: a straight line at full speed to the
 # closest point of its task's space. Here the same scene is attempted from every start
-# of a grid twice, by that perfect user and by an imperfect one (direction noise, lag
-# and tremor; reference/model, "Simulated users"), in the baseline and ShaCC modes. The
-# panels colour each start by its outcome; the last figure marks the starts where the
-# perfect user succeeds and the imperfect one does not, per mode.
+# of a grid twice, by that perfect user and by an imperfect one (a wandering hand whose
+# direction error drifts with a correlation time, a tremor, and a change of mind;
+# reference/model, "Simulated users"), in the baseline and ShaCC modes. The panels
+# colour each start by its outcome; the last figure marks the starts where the perfect
+# user succeeds and the imperfect one does not, per mode, and a table says how long
+# the successful approaches took.
 
 # %% tags=["parameters"]
 SCENE = None    # a scene file; None: the shipped scene 09_mug_behind_two
 GRID = 16       # starts per side of the start plane; 64 for publication figures
-NOISE = 0.3     # user_noise, rad
-LAG = 0.2       # user_lag, the probability that a step repeats the previous one
+NOISE = 0.3     # user_noise, rad: the wandering hand's stationary direction error
+TAU = 0.5       # user_noise_tau, s: its correlation time (0: white noise)
 TREMOR = 0.01   # user_tremor, m (at user_tremor_hz, 5 Hz by default)
+SWITCH = 0.2    # user_switch: the probability of heading for another task first
 SEED = 0        # the users' random numbers
 FIGURES = None  # a folder to save the figures in (imperfect_users*.png); None: show only
 
@@ -35,7 +38,8 @@ from sweeps.pipeline import evaluate_results
 path = SCENE or next(p for p in shipped_scene_paths() if "mug_behind_two" in p.name)
 scene = load_scene(path)
 perfect = precompute(scene, scene.settings(overrides={"start_grid": [GRID, GRID]}))
-user = {"user_noise": NOISE, "user_lag": LAG, "user_tremor": TREMOR, "seed": SEED}
+user = {"user_noise": NOISE, "user_noise_tau": TAU, "user_tremor": TREMOR,
+        "user_switch": SWITCH, "seed": SEED}
 imperfect = replace(perfect, settings=perfect.settings.with_overrides(user))
 modes = ("baseline", "shacc")
 runs = {"perfect": evaluate_results([perfect], modes),
@@ -93,3 +97,16 @@ fig.tight_layout(rect=(0, 0.06, 1, 1))
 if FIGURES:
     fig.savefig(Path(FIGURES) / "imperfect_users_lost.png", dpi=90, bbox_inches="tight")
 changes
+
+# %% [markdown]
+# ## How long the successful approaches took
+#
+# Per user and mode: the mean time to activation (s) and path length (m) of the
+# successes, and the share of all steps under ShaCC's meta skill.
+
+# %%
+pd.DataFrame({f"{who}, {mode}": {
+    "time (s)": ev.evaluation.metrics.time_mean[0, m],
+    "path (m)": ev.evaluation.metrics.path_length_mean[0, m],
+    "meta skill share": ev.evaluation.metrics.assist_fraction[0, m, 1]}
+    for who, ev in runs.items() for m, mode in enumerate(modes)}).T.round(3)

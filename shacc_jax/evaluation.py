@@ -235,15 +235,22 @@ def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
         jnp.where(found, jnp.minimum(k * path.step_length, path.length), out.path_length))
 
 
-def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps) -> Rollouts:
-    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T, U))."""
+def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps, assist=None
+              ) -> Rollouts:
+    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T, U);
+    ``assist``: the steps under each kind of assistance, (N, T, 4), where the mode
+    counts them; else the paper's modes': the meta skill's steps are the scene's, the
+    rest none)."""
     T = geometry.task_mask.shape[0]
     orient = (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis)
     dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
         out, r, orient, jnp.arange(T, dtype=jnp.int32))
     code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
+    if assist is None:
+        zero = jnp.zeros_like(meta_steps)
+        assist = jnp.stack([out.step - meta_steps, meta_steps, zero, zero], axis=-1)
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
-                    r, drawn)
+                    r, drawn, assist)
 
 
 def _check_shapes(geometry: Geometry, params: Params, layout: Layout) -> int:
@@ -359,8 +366,7 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
     per_mode = [jax.vmap(_assemble)(geometry, drawn, *one) for one in per_mode]
     rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)
-    result = Evaluation(rollouts, batch_metrics(rollouts.outcome, rollouts.delta_R,
-                                                geometry.task_mask))
+    result = Evaluation(rollouts, batch_metrics(rollouts, geometry.task_mask, params.dt))
     if points:
         result = jax.tree.map(lambda a: a.reshape(points, S, *a.shape[1:]), result)
     return result

@@ -10,55 +10,78 @@ rollouts were split into pieces, devices or chunks.
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from geometry_precompute.outcomes import scene_metrics as scene_metrics_np
 
-from .types import OUTCOMES, SUCCESS, SceneMetrics
+from .types import OUTCOMES, SUCCESS, Rollouts, SceneMetrics
 
 
 def scene_metrics(outcome: Int[Array, "N T"], delta_r: Float[Array, "N T"],
-                  task_mask: Bool[Array, " T"]):
-    """(u_scene, mean delta_R over successes (NaN if none), outcome counts, n rollouts).
-    Padded tasks count nowhere."""
+                  task_mask: Bool[Array, " T"], step: Int[Array, "N T"],
+                  path_length: Float[Array, "N T"], assist: Int[Array, "N T 4"],
+                  dt: Float[Array, ""]):
+    """(u_scene, mean delta_R over successes (NaN if none), outcome counts, n rollouts,
+    mean time to activation and path length over successes (NaN if none), the
+    fractions of the steps under each kind of assistance (NaN without a step)). Padded
+    tasks count nowhere."""
     valid = jnp.broadcast_to(task_mask, outcome.shape)
     n = jnp.sum(valid)
     success = valid & (outcome == SUCCESS)
     n_success = jnp.sum(success)
     u = n_success / jnp.maximum(n, 1)
-    mean_dr = jnp.where(n_success > 0,
-                        jnp.sum(jnp.where(success, delta_r, 0.0))
-                        / jnp.maximum(n_success, 1).astype(delta_r.dtype),
-                        jnp.nan)
+    some = n_success > 0
+    per_success = jnp.maximum(n_success, 1).astype(delta_r.dtype)
+    mean_dr = jnp.where(some, jnp.sum(jnp.where(success, delta_r, 0.0)) / per_success, jnp.nan)
+    time = jnp.where(some, jnp.sum(jnp.where(success, step, 0)).astype(delta_r.dtype) * dt
+                     / per_success, jnp.nan)
+    path = jnp.where(some, jnp.sum(jnp.where(success, path_length, 0.0)) / per_success, jnp.nan)
+    taken = jnp.sum(jnp.where(valid[..., None], assist, 0), axis=(0, 1)).astype(delta_r.dtype)
+    all_steps = jnp.sum(taken)
+    fraction = jnp.where(all_steps > 0, taken / jnp.maximum(all_steps, 1.0), jnp.nan)
     counts = jnp.stack([jnp.sum(valid & (outcome == c)) for c in range(len(OUTCOMES))])
-    return u.astype(delta_r.dtype), mean_dr, counts.astype(jnp.int32), n.astype(jnp.int32)
+    return (u.astype(delta_r.dtype), mean_dr, counts.astype(jnp.int32), n.astype(jnp.int32),
+            time, path, fraction)
 
 
-def batch_metrics(outcome: Int[Array, "S M N T"], delta_r: Float[Array, "S M N T"],
-                  task_mask: Bool[Array, "S T"]) -> SceneMetrics:
+def batch_metrics(rollouts: Rollouts, task_mask: Bool[Array, "S T"],
+                  dt: Float[Array, " S"]) -> SceneMetrics:
     """:func:`scene_metrics` of every scene and mode of a batch."""
-    return SceneMetrics(*jax.vmap(jax.vmap(scene_metrics, (0, 0, None)))(
-        outcome, delta_r, task_mask))
+    per_mode: Any = jax.vmap(scene_metrics, (0, 0, None, 0, 0, 0, None))
+    return SceneMetrics(*jax.vmap(per_mode)(
+        rollouts.outcome, rollouts.delta_R, task_mask, rollouts.step, rollouts.path_length,
+        rollouts.assist, dt))
 
 
-def host_metrics(outcome, delta_r, task_mask) -> SceneMetrics:
+def host_metrics(rollouts: Rollouts, task_mask, dt) -> SceneMetrics:
     """:func:`batch_metrics` in NumPy and double precision, of rollouts (*lead, S, M, N,
-    T) (``*lead``: e.g. a points axis) with ``task_mask`` (S, T): u_scene = successes /
-    rollouts as a float64 fraction, delta_R_mean the float64 mean of the successes'
-    delta_R (NaN where there is none), outcome_counts (*lead, S, M, 5) and n_rollouts
-    (*lead, S, M) as int64 (``geometry_precompute.outcomes``, which a sweep's CPU workers
-    use without JAX).
+    T) (``*lead``: e.g. a points axis) with ``task_mask`` (S, T) and the scenes' ``dt``
+    (*lead, S): u_scene = successes / rollouts as a float64 fraction, the means in
+    float64 over the successes (NaN where there is none), outcome_counts (*lead, S, M,
+    5) and n_rollouts (*lead, S, M) as int64, the assistance's fractions of the steps
+    (``geometry_precompute.outcomes``, which a sweep's CPU workers use without JAX).
 
     Example::
 
         >>> import numpy as np
         >>> from shacc_jax import host_metrics
+        >>> from shacc_jax.types import Rollouts
         >>> outcome = np.array([[[[0, 1], [0, 0]]]])        # S=1, M=1, N=2, T=2
         >>> delta_r = np.array([[[[0.1, np.nan], [0.3, 0.2]]]])
-        >>> m = host_metrics(outcome, delta_r, np.array([[True, True]]))
+        >>> step = np.array([[[[10, 20], [30, 40]]]])
+        >>> assist = np.stack([step, 0 * step, 0 * step, 0 * step], -1)
+        >>> ro = Rollouts(outcome, None, step, None, 0.5 + 0 * delta_r, None, delta_r,
+        ...               None, None, assist)
+        >>> m = host_metrics(ro, np.array([[True, True]]), np.array([0.02]))
         >>> float(m.u_scene[0, 0]), round(float(m.delta_R_mean[0, 0]), 3)
         (0.75, 0.2)
+        >>> round(float(m.time_mean[0, 0]), 3), m.assist_fraction[0, 0].tolist()
+        (0.533, [1.0, 0.0, 0.0, 0.0])
     """
-    return SceneMetrics(*scene_metrics_np(outcome, delta_r, task_mask))
+    return SceneMetrics(*scene_metrics_np(rollouts.outcome, rollouts.delta_R, task_mask,
+                                          rollouts.step, rollouts.path_length,
+                                          rollouts.assist, dt))

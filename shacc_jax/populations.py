@@ -19,7 +19,7 @@ from .types import Geometry, Params
 
 
 def population_values(key: Array, x: Params, dtype) -> Float[Array, "4"]:
-    """The values of the populated user settings (``POPULATED``: user_noise, user_lag,
+    """The values of the populated user settings (``POPULATED``: user_noise, user_noise_tau,
     user_tremor, user_tremor_hz) of the rollout ``key`` under one scene's settings ``x``:
     a setting without a population keeps its value; one with draws from a uniform
     number u in [0, 1) of the rollout's stream (``key`` folded with 2, one per

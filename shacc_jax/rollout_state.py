@@ -21,8 +21,12 @@ class Lane(NamedTuple):
     trigonometry: the rotation matrix is made where used, which reads fewer numbers a
     step than a stored one; the trigonometry costs more to recompute on a CPU) and aim
     point, the perfect user's path (closest point, direction, length; the rest of
-    ``automaton.Path`` is p0 and numbers of the settings). Every step reads them all:
-    the move is bound by memory, so nothing is stored twice."""
+    ``automaton.Path`` is p0 and numbers of the settings); for a change of mind the
+    task headed for first (``decoy``: the task itself where the rollout drew none), its
+    space and aim point, and the distance from the start to that space; the wandering
+    hand's coefficients (w_{k+1} = ou_a w_k + ou_b xi_k) and the steps a mode switch
+    costs. Every step reads them all: the move is bound by memory, so nothing is
+    stored twice."""
 
     scene: Array
     target: Array
@@ -38,12 +42,19 @@ class Lane(NamedTuple):
     c0: Array
     u: Array
     length: Array
+    decoy: Array
+    decoy_own: tuple[Array, Array, Array, Array, Array]
+    decoy_aim: Array
+    ou_a: Array
+    ou_b: Array
+    switch_steps: Array
 
 
 class Move(NamedTuple):
     """A step's move, before its check: the step count, the commanded and gripper
     positions, the displacement, the path length, the gripper's path since the last
-    full check."""
+    full check, and the user's state after the step (the wandering hand's vector, the
+    joystick's mode and pause, whether it heads for its own task)."""
 
     k: Array
     q: V3
@@ -51,6 +62,10 @@ class Move(NamedTuple):
     delta: V3
     travelled: Array
     moved: Array
+    w: V3
+    mode: Array | None
+    pause: Array | None
+    turned: Array | None
 
 
 class Check(NamedTuple):
@@ -76,7 +91,13 @@ class State(NamedTuple):
     k: Array          # steps taken
     q: V3             # commanded position
     p: V3             # gripper position
-    last: V3          # the previous step's displacement
+    w: V3             # the wandering hand's rotation vector w_k, rad
+    # The joystick's and the change of mind's state: None where no lane of the program
+    # has them (Layout.joystick, Layout.switching), so that a step carries nothing more.
+    mode: Array | None    # the joystick's mode: -1 not chosen yet, 0 horizontal, 1 vertical
+    pause: Array | None   # steps of a mode switch still to wait, without motion
+    turned: Array | None  # heading for its own task (a change of mind is over, or none)
+    d0: Array | None      # the distance from the start to the first-headed task's space, m
     r: Array          # orientation (4,)
     meta_steps: Array
     travelled: Array  # path length of the commanded position, m

@@ -202,10 +202,17 @@ def _size(n: float) -> str:
     return f"{int(n)} bytes"
 
 
-def _fields(fields: Sequence[str] | None) -> tuple[str, ...]:
-    """The Rollouts fields named by ``fields`` (None: all), each checked."""
+# What the per-scene metrics read (copied back whenever the plan computes them).
+METRIC_FIELDS = ("outcome", "step", "path_length", "delta_R", "assist")
+
+
+def _fields(fields: Sequence[str] | None, metrics: bool = False) -> tuple[str, ...]:
+    """The Rollouts fields named by ``fields`` (None: all), each checked; with
+    ``metrics``, those the metrics read too."""
     if fields is None:
         return Rollouts._fields
+    if metrics:
+        fields = (*fields, *METRIC_FIELDS)
     if isinstance(fields, str):
         raise ValueError(f"fields: a sequence of Rollouts field names, not the string "
                          f"{fields!r}")
@@ -294,7 +301,7 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     return RunPlan(layout=replace(layout, n_starts=n_per), n_scenes=S, n_starts=N, n_points=P,
                    pieces=tuple(range(0, N, n_per)), starts_per_piece=n_per,
                    devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
-                   padded_scenes=per_part * len(devices), fields=_fields(fields),
+                   padded_scenes=per_part * len(devices), fields=_fields(fields, metrics),
                    metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
 
 
@@ -415,8 +422,8 @@ def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
                     devices[k], *part(k, piece), p.layout, p.fields), range(len(devices))))
             pieces.append(join([join(outs, lead, S)], lead + 2, min(n, N - first)))
     rollouts = join(pieces, lead + 2, N)
-    metrics = host_metrics(rollouts.outcome, rollouts.delta_R, baked.task_mask) \
-        if p.metrics else None
+    dt = np.asarray(baked.dt if points is None else [b.dt for b in points])
+    metrics = host_metrics(rollouts, baked.task_mask, dt) if p.metrics else None
     # Fields not copied back (and the metrics, when the caller computes them) are None.
     return Evaluation._make((rollouts, metrics))
 

@@ -25,6 +25,7 @@ from geometry_precompute.schema import lanes_per_block_default
 
 from . import automaton as am
 from . import lanes as scheduler
+from . import quaternion as quat
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
 from .assistance import prepare
@@ -34,7 +35,7 @@ from .rollout_state import Lane, State
 from .streams import rollout_draws, rollout_key, step_key
 from .types import Geometry, Layout, Params
 from .user_models import aim, is_perfect, move, shake
-from .vec3 import of
+from .vec3 import length, of, xyz
 
 # A block checks in full at most a 1 / share of its lanes per step (1: all, without
 # gathering the others out); a lane that needs a full check and finds no place waits a
@@ -70,13 +71,38 @@ def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, whic
     x = x._replace(user_dist=jnp.zeros((), jnp.int32), user_dist_args=jnp.zeros((), dtype),
                    user_dist_values=jnp.zeros((), dtype))
     n = am.rollout_numbers(x, dtype)
-    own = (g.kind[target], getattr(g, f"center_{which}")[target],
-           getattr(g, f"quat_{which}")[target], getattr(g, f"dims_{which}")[target],
-           sp.trig[target])
+
+    def space(task):
+        return (g.kind[task], getattr(g, f"center_{which}")[task],
+                getattr(g, f"quat_{which}")[task], getattr(g, f"dims_{which}")[task],
+                sp.trig[task])
+
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
+    once = rollout_draws(key, dtype)
+    # A change of mind (drawn with probability user_switch): first another of the
+    # scene's real tasks, each as likely; a one-task scene has none to head for.
+    n_real = jnp.sum(g.task_mask).astype(jnp.int32)
+    pick_other = jnp.minimum((once.other * (n_real - 1).astype(dtype)).astype(jnp.int32),
+                             jnp.maximum(n_real - 2, 0))
+    other = jnp.where(pick_other >= target, pick_other + 1, pick_other)
+    decoy = jnp.where((once.switch < x.user_switch) & (n_real > 1), other, target)
+    # The wandering hand: w_{k+1} = a w_k + sqrt(1 - a^2) user_noise xi_k.
+    tau = x.user_noise_tau
+    ou_a = jnp.where(tau > 0, jnp.exp(-x.dt / jnp.where(tau > 0, tau, 1.0)), 0.0)
+    ou_b = jnp.sqrt(jnp.maximum(1.0 - ou_a * ou_a, 0.0)) * x.user_noise
+    switch_steps = jnp.round(x.user_mode_switch_s / x.dt)
     return Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
-                step_key(key), rollout_draws(key, dtype), own, g.aim_point[target],
-                path.c0, path.u, path.length)
+                step_key(key), once, space(target), g.aim_point[target],
+                path.c0, path.u, path.length, decoy, space(decoy), g.aim_point[decoy],
+                ou_a.astype(dtype), ou_b.astype(dtype), switch_steps.astype(jnp.int32))
+
+
+def _distance_to_decoy(lane: Lane, p: Array) -> Array:
+    """The distance from p to the space of the task the lane heads for first."""
+    kind, center, orientation, dims, trig = lane.decoy_own
+    c = shapes.project_components(kind, center, quat.matrix_entries(orientation), dims, trig,
+                                  of(p))
+    return length(xyz(lambda i: c[i] - p[i]))
 
 
 def _once(tree, token: Bool[Array, ""]):
@@ -181,8 +207,17 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
         first = lanes(checked)(lane, p_start, lane.r0)
         zero = jnp.zeros(n, dtype)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
-        return lane, State(zero, of(lane.p0), of(first.p), (zero, zero, zero), lane.r0,
-                           jnp.zeros(n, jnp.int32), zero, first.done, first.code,
+        w0 = lanes(lambda ln: of(ln.x.user_noise * ln.once.noise0))(lane)
+        mode = pause = turned = d0 = None
+        if layout.joystick:
+            mode, pause = jnp.full(n, -1, jnp.int32), jnp.zeros(n, jnp.int32)
+        if layout.switching:
+            # The distance from the start to the first-headed task's space (a change
+            # of mind turns when it has fallen far enough).
+            turned = lane.decoy == lane.target
+            d0 = lanes(_distance_to_decoy)(lane, first.p)
+        return lane, State(zero, of(lane.p0), of(first.p), w0, mode, pause, turned, d0,
+                           lane.r0, jnp.zeros(n, jnp.int32), zero, first.done, first.code,
                            first.activated, first.clear, zero, live)
 
     def finish(ln, e):
@@ -195,7 +230,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     def step(s: State, lane: Lane) -> State:
         # Steps are never negative: a condition true at run time that XLA cannot fold.
         token = s.k[0] >= 0
-        m = lanes(move)(lane, s, once(lanes(aim)(lane, s), token))
+        m = lanes(move)(lane, s, once(lanes(partial(aim, decoys=layout.switching))(lane, s),
+                                      token))
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
 
@@ -229,8 +265,9 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
             return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, old)
 
         p_new = tuple(put(m.p[i], c.p[i]) for i in range(3))
-        t = State(adv(m.k, s.k), adv(m.q, s.q), adv(p_new, s.p),
-                  adv(m.delta, s.last), put(s.r, c.r),
+        t = State(adv(m.k, s.k), adv(m.q, s.q), adv(p_new, s.p), adv(m.w, s.w),
+                  adv(m.mode, s.mode), adv(m.pause, s.pause), adv(m.turned, s.turned), s.d0,
+                  put(s.r, c.r),
                   put(s.meta_steps, sub_s.meta_steps + c.counted.astype(jnp.int32)),
                   adv(put(m.travelled, c.travelled), s.travelled),
                   put(s.done, c.done), put(s.code, c.code), put(s.activated, c.activated),

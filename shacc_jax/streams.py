@@ -36,27 +36,30 @@ def rollout_key(seed: Int[Array, ""], scene_key: Int[Array, ""], task: Int[Array
 
 
 class StepDraws(NamedTuple):
-    """One step's random numbers: |N(0, 1)| (the noise angle in units of
-    ``user_noise``), the noise axis' angle on the circle across the direction, in [0,
-    2 pi), and a uniform number in [0, 1) that decides the lag."""
+    """One step's random numbers: the three N(0, 1) components of the wandering hand's
+    innovation xi_k (``user_models``: w_{k+1} = a w_k + sqrt(1 - a^2) user_noise xi_k)."""
 
-    noise: Float[Array, "..."]
-    axis_angle: Float[Array, "..."]
-    lag: Float[Array, "..."]
+    xi: Float[Array, "... 3"]
 
 
 class RolloutDraws(NamedTuple):
-    """A rollout's random numbers drawn once: the tremor's unit axis and its phase."""
+    """A rollout's random numbers drawn once: the tremor's unit axis and its phase; the
+    wandering hand's first rotation vector in units of ``user_noise`` (three N(0, 1)
+    components); the change of mind's two uniform numbers in [0, 1): whether it happens
+    (below ``user_switch``) and which other task is headed for first."""
 
     tremor_axis: Float[Array, "... 3"]
     tremor_phase: Float[Array, "..."]
+    noise0: Float[Array, "... 3"]
+    switch: Float[Array, "..."]
+    other: Float[Array, "..."]
 
 
 def step_draws(key: Array, k: Int[Array, ""], dtype) -> StepDraws:
     """The random numbers of step k (0 for the step from p_0 to p_1) of the rollout
     ``key``: two threefry blocks, counters (k, 0) and (k, 1) under the rollout's step
-    key, give three 32-bit words; each becomes a float in [0, 1) of 24 bits, the first
-    |N(0, 1)| by the inverse of the half-normal's distribution function."""
+    key, give three 32-bit words; each becomes a float in (0, 1) of 24 bits, u = (w >> 8
+    + 1/2) / 2^24, and that a N(0, 1) number, sqrt(2) erfinv(2u - 1)."""
     return step_draws_of(step_key(key), k, dtype)
 
 
@@ -99,20 +102,26 @@ def _threefry(k0: Array, k1: Array, x0: Array, x1: Array) -> tuple[Array, Array]
 
 
 def _draws_of(words: tuple[Array, Array, Array], dtype) -> StepDraws:
-    u = (jnp.stack(words) >> 8).astype(jnp.float32) * (1.0 / (1 << 24))
-    noise = jnp.sqrt(2.0) * jax.scipy.special.erfinv(u[0])
-    return StepDraws(noise.astype(dtype), (2.0 * jnp.pi * u[1]).astype(dtype), u[2].astype(dtype))
+    u = ((jnp.stack(words) >> 8).astype(jnp.float32) + 0.5) * (1.0 / (1 << 24))
+    xi = jnp.sqrt(2.0) * jax.scipy.special.erfinv(2.0 * u - 1.0)
+    return StepDraws(jnp.moveaxis(xi, 0, -1).astype(dtype))
 
 
 def rollout_draws(key: Array, dtype) -> RolloutDraws:
     """The numbers the rollout ``key`` draws once: e uniform on the sphere (from z
-    uniform in [-1, 1] and an angle uniform in [0, 2 pi)) and phi in [0, 2 pi)."""
+    uniform in [-1, 1] and an angle uniform in [0, 2 pi)) and phi in [0, 2 pi) (the key
+    folded with 0); the wandering hand's first vector (folded with 3); the change of
+    mind's two uniform numbers (folded with 4). Folds 1 and 2 are the steps' and the
+    populations'."""
     u = jax.random.uniform(jax.random.fold_in(key, 0), (3,), dtype)
     z = 2.0 * u[0] - 1.0
     rho = jnp.sqrt(jnp.maximum(1.0 - z * z, 0.0))
     lon = 2.0 * jnp.pi * u[1]
+    switch = jax.random.uniform(jax.random.fold_in(key, 4), (2,), dtype)
     return RolloutDraws(jnp.stack([rho * jnp.cos(lon), rho * jnp.sin(lon), z]),
-                        2.0 * jnp.pi * u[2])
+                        2.0 * jnp.pi * u[2],
+                        jax.random.normal(jax.random.fold_in(key, 3), (3,), dtype),
+                        switch[0], switch[1])
 
 
 def user_draws(seed, scene_key, task, start, n_steps: int, dtype=jnp.float32
@@ -122,8 +131,8 @@ def user_draws(seed, scene_key, task, start, n_steps: int, dtype=jnp.float32
     kernel draws, for slow references to replay.
 
     >>> steps, once = user_draws(0, 7, 1, 2, n_steps=5)
-    >>> steps.noise.shape, once.tremor_axis.shape
-    ((5,), (3,))
+    >>> steps.xi.shape, once.tremor_axis.shape
+    ((5, 3), (3,))
     """
     key = rollout_key(*(jnp.asarray(v, jnp.int32) for v in (seed, scene_key, task, start)))
     steps = jax.vmap(lambda k: step_draws(key, k, dtype))(jnp.arange(n_steps, dtype=jnp.int32))

@@ -21,6 +21,7 @@ from geometry_precompute import schema
 from geometry_precompute.schema import (  # noqa: F401  (re-exported)
     ALL_MODES,
     AMBIGUOUS,
+    ASSISTANCE,
     COLLISION,
     INVALID,
     MODES,
@@ -136,7 +137,7 @@ class Geometry(NamedTuple):
 class Params(NamedTuple):
     """Every rollout setting (``geometry_precompute.schema.PARAMS``) as a leaf of shape
     (S,), or (P, S) for P sweep points over one geometry; the populations of simulated
-    users (``user_dist*``) have trailing axes: the four populated user settings, then
+    users (``user_dist*``) have trailing axes: the seven populated user settings, then
     their numbers or a list's 16 values. Leaves, so new values never recompile. The fields are the
     schema's, in its order (a test keeps them so)."""
 
@@ -149,18 +150,22 @@ class Params(NamedTuple):
     user_seed: Int[Array, "*P S"]
     collision: Bool[Array, "*P S"]
     user_noise: Float[Array, "*P S"]
-    user_lag: Float[Array, "*P S"]
+    user_noise_tau: Float[Array, "*P S"]
     user_tremor: Float[Array, "*P S"]
     user_tremor_hz: Float[Array, "*P S"]
+    user_input_modes: Bool[Array, "*P S"]
+    user_mode_switch_s: Float[Array, "*P S"]
+    user_switch: Float[Array, "*P S"]
+    user_switch_at: Float[Array, "*P S"]
     user_aim_object: Bool[Array, "*P S"]
     activation_swept: Bool[Array, "*P S"]
     gripper_finger_length: Float[Array, "*P S"]
     gripper_finger_radius: Float[Array, "*P S"]
     gripper_opening: Float[Array, "*P S"]
     gripper_palm_radius: Float[Array, "*P S"]
-    user_dist: Int[Array, "*P S 4"]
-    user_dist_args: Float[Array, "*P S 4 4"]
-    user_dist_values: Float[Array, "*P S 4 16"]
+    user_dist: Int[Array, "*P S 7"]
+    user_dist_args: Float[Array, "*P S 7 4"]
+    user_dist_values: Float[Array, "*P S 7 16"]
 
     @classmethod
     def from_bake(cls, baked, dtype=None, on_host: bool = False) -> Params:
@@ -249,11 +254,14 @@ class Rollouts(NamedTuple):
     ended (m); ``path_length`` (m); ``meta_steps``: steps spent in a meta-skill region;
     ``delta_R`` (rad): the orientation jump at activation, NaN unless success;
     ``orientation``: the end orientation, a unit quaternion (w, x, y, z); ``user``: the
-    values of the populated user settings the rollout drew (``user_noise`` rad,
-    ``user_lag``, ``user_tremor`` m, ``user_tremor_hz`` Hz, in that order; the same in every
-    mode), (S, M, N, T, 4) where some scene's user is a population (``Layout.populations``),
-    else (S, M, N, T, 0). Padded tasks (``task_mask`` False) hold no rollout: read
-    ``[..., :T_scene]``."""
+    values of the populated user settings the rollout drew
+    (``geometry_precompute.population.POPULATED``, in that order; the same in every
+    mode), (S, M, N, T, U) where some scene's user is a population
+    (``Layout.populations``), else (S, M, N, T, 0); ``assist``: the steps before the
+    rollout ended under each kind of assistance, (S, M, N, T, 4) in the order of
+    ``ASSISTANCE`` (none; scene: the meta skill's cluster average; correct: towards
+    the intended task; wrong: towards another), summing to ``step``. Padded tasks
+    (``task_mask`` False) hold no rollout: read ``[..., :T_scene]``."""
 
     outcome: Int[AnyArray, "S M N T"]
     activated: Int[AnyArray, "S M N T"]
@@ -263,19 +271,27 @@ class Rollouts(NamedTuple):
     meta_steps: Int[AnyArray, "S M N T"]
     delta_R: Float[AnyArray, "S M N T"]  # NaN unless success
     orientation: Float[AnyArray, "S M N T 4"]  # R at the end (w, x, y, z)
-    user: Float[AnyArray, "S M N T U"]  # drawn user settings (U = 4 or 0)
+    user: Float[AnyArray, "S M N T U"]  # drawn user settings (U = len(POPULATED) or 0)
+    assist: Int[AnyArray, "S M N T 4"]  # steps under no, scene, correct, wrong assistance
 
 
 class SceneMetrics(NamedTuple):
     """Per scene and mode, shape (S, M, ...) (reference/statistics): ``u_scene``, the
     fraction of successful rollouts; ``delta_R_mean`` (rad), NaN where a mode has no
     success; ``outcome_counts`` (S, M, 5) in the order of ``shacc_jax.OUTCOMES``;
-    ``n_rollouts``, the real (unpadded) rollouts."""
+    ``n_rollouts``, the real (unpadded) rollouts; ``time_mean`` (s) and
+    ``path_length_mean`` (m), the means over successes of the time to activation and
+    of the path length, NaN without a success; ``assist_fraction`` (S, M, 4), the
+    fraction of all the rollouts' steps spent under each kind of assistance
+    (``ASSISTANCE``), NaN where no rollout took a step."""
 
     u_scene: Float[AnyArray, "S M"]
     delta_R_mean: Float[AnyArray, "S M"]  # NaN where a mode has no success
     outcome_counts: Int[AnyArray, "S M 5"]
     n_rollouts: Int[AnyArray, "S M"]
+    time_mean: Float[AnyArray, "S M"]
+    path_length_mean: Float[AnyArray, "S M"]
+    assist_fraction: Float[AnyArray, "S M 4"]
 
 
 class Evaluation(NamedTuple):

@@ -1,18 +1,28 @@
 """The user's command model: what a simulated user commands at each step.
 
 The perfect user moves in a straight line to the closest point of its task's space
-(``automaton``'s closed form). An imperfect one, stepped (reference/model, "Simulated
-users"):
+(``automaton``'s closed form). An imperfect one is stepped (reference/model, "Simulated
+users"); one step, every parameter on:
 
-- ``user_tremor`` A at ``user_tremor_hz`` f: the gripper is at p_k = q_k + A sin(2 pi f
-  k dt + phi) e, q_k the commanded position (q_0 the start), e a unit axis uniform on
-  the sphere and phi uniform in [0, 2 pi), both drawn once per rollout;
-- each step the user looks at the gripper: d = c(p_k) - p_k, c the closest point of the
-  task's space (``user_aim`` "space") or the task's aim point (``Geometry.aim_point``,
-  "object"); with probability ``user_lag`` (never the first step) the step repeats
-  the previous step's displacement, else it is min(v_max dt, |d|) along d's direction
-  turned by an angle |N(0, user_noise^2)| about an axis uniform on the circle across
-  it (no step when |d| = 0); q_{k+1} = q_k + step.
+1. the gripper is at p_k = q_k + A sin(2 pi f k dt + phi) e (``user_tremor`` A at
+   ``user_tremor_hz`` f; e uniform on the sphere and phi in [0, 2 pi), drawn once);
+   q_k is the commanded position, q_0 the start;
+2. the target: the task first headed for (a change of mind, drawn once with
+   probability ``user_switch``: another task of the scene, uniformly) until the
+   distance from p_k to its space has fallen to (1 - ``user_switch_at``) of its value
+   at the start, then the rollout's own task;
+3. the command d = c(p_k) - p_k, c the closest point of the target's space
+   (``user_aim`` "space") or its aim point ("object"); no step where |d| = 0;
+4. u, d's direction, turned by w_k's part across it: by the angle |w_k x u| about
+   w_k's part across u (a wandering hand: w_0 ~ N(0, ``user_noise``^2 I), w_{k+1} = a
+   w_k + sqrt(1 - a^2) ``user_noise`` xi_k, a = exp(-dt / ``user_noise_tau``), a = 0
+   for tau 0: white noise);
+5. with ``user_input`` "modes" (a two-mode joystick), the command |d| u is split into
+   its horizontal and vertical parts; the first step takes the mode of the longer;
+   the user switches when the current mode's part is shorter than half the other's,
+   which costs ``user_mode_switch_s`` without motion; it moves along the current part;
+6. the step: min(v_max dt, the length of what is commanded) along it; q_{k+1} = q_k +
+   step.
 
 A lane whose user is perfect (:func:`is_perfect`) takes the closed form's sample
 positions, so it meets the same activation as the closed form. The random numbers are
@@ -37,42 +47,35 @@ from .vec3 import V3, length, xyz
 
 
 def is_perfect(params: Params) -> Bool[Array, "..."]:
-    """Where the user is the perfect one: every user parameter zero, aiming at the
-    space."""
-    return ((params.user_noise <= 0) & (params.user_lag <= 0) & (params.user_tremor <= 0)
-            & ~params.user_aim_object & ~params.activation_swept)
+    """Where the user is the perfect one: every user parameter at its default (no
+    noise, tremor or change of mind, a 3-D input, aiming at the space, steps checked
+    where they land)."""
+    return ((params.user_noise <= 0) & (params.user_tremor <= 0) & (params.user_switch <= 0)
+            & ~params.user_input_modes & ~params.user_aim_object & ~params.activation_swept)
 
 
-def turn_across(u: Float[Array, "3"], angle: Array, axis_angle: Array) -> Float[Array, "3"]:
-    """The unit vector u turned by ``angle`` about the axis a = cos(psi) e1 + sin(psi) e2
-    across it, psi = ``axis_angle``; (e1, e2, u) right-handed, e1 from the world x
-    axis (the y axis where u is within 25 degrees of x). Rodrigues' formula with a
-    perpendicular to u: u cos(angle) + (a x u) sin(angle).
+def turn_by(u: V3, w: V3) -> V3:
+    """The unit vector u turned by w's part across it: by the angle theta = |w x u|
+    about (w x u) / theta, Rodrigues' formula with an axis perpendicular to u:
+    u cos(theta) + (w x u) sin(theta) / theta (its limit u + w x u at theta = 0)."""
+    c = (w[1] * u[2] - w[2] * u[1], w[2] * u[0] - w[0] * u[2], w[0] * u[1] - w[1] * u[0])
+    theta = length(c)
+    sin, cos = sincos(theta)
+    small = theta < 1e-4
+    # sin(t) / t; its series where t is small (the division would lose digits).
+    scale = jnp.where(small, 1.0 - theta * theta / 6.0, sin / jnp.where(small, 1.0, theta))
+    return xyz(lambda i: cos * u[i] + scale * c[i])
+
+
+def turn_across(u: Float[Array, "3"], w: Float[Array, "3"]) -> Float[Array, "3"]:
+    """:func:`turn_by` on (3,) arrays.
 
     >>> import jax.numpy as jnp
-    >>> v = turn_across(jnp.array([0., 0, 1]), jnp.pi / 2, 0.0)
+    >>> v = turn_across(jnp.array([0., 0, 1]), jnp.array([jnp.pi / 2, 0, 0]))
     >>> [round(float(x), 6) + 0.0 for x in v]
     [0.0, -1.0, 0.0]
     """
-    return jnp.stack(_turn_across(u[0], u[1], u[2], sincos(angle), sincos(axis_angle)))
-
-
-def _turn_across(ux, uy, uz, angle_sc, axis_sc) -> tuple[Array, Array, Array]:
-    """:func:`turn_across` on scalar components (vmapped over lanes, every intermediate
-    a plain row of the batch, no 3-vector products), given (sin, cos) of the angle and
-    of the axis' angle."""
-    big = jnp.abs(ux) > 0.9
-    hu = jnp.where(big, uy, ux)  # <h, u>
-    e1x = jnp.where(big, 0.0, 1.0) - hu * ux
-    e1y = jnp.where(big, 1.0, 0.0) - hu * uy
-    e1z = -hu * uz
-    n = quat.sqrt_divisor(e1x * e1x + e1y * e1y + e1z * e1z)  # >= 0.43 here
-    e1x, e1y, e1z = e1x / n, e1y / n, e1z / n
-    e2x, e2y, e2z = uy * e1z - uz * e1y, uz * e1x - ux * e1z, ux * e1y - uy * e1x
-    # a x u = cos(psi) (e1 x u) + sin(psi) (e2 x u) = -cos(psi) e2 + sin(psi) e1
-    (sa, ca), (sp, cp) = angle_sc, axis_sc
-    return (ca * ux + sa * (sp * e1x - cp * e2x), ca * uy + sa * (sp * e1y - cp * e2y),
-            ca * uz + sa * (sp * e1z - cp * e2z))
+    return jnp.stack(turn_by((u[0], u[1], u[2]), (w[0], w[1], w[2])))
 
 
 def straight(lane: Lane, step_length: Array) -> am.Path:
@@ -98,42 +101,67 @@ def shake(lane: Lane, k: Array) -> Array:
 
 class Aim(NamedTuple):
     """What a step's move reads more than once, computed once (:func:`move`): the
-    closest point of the task's space to the gripper, (sin, cos) of the noise angle and
-    of its axis' angle, the lag's uniform number, the tremor's displacement after the
+    closest point of the lane's own task's space and of the first-headed one to the
+    gripper, the step's three N(0, 1) numbers, the tremor's displacement after the
     step."""
 
     closest: V3
-    angle: tuple[Array, Array]
-    axis: tuple[Array, Array]
-    lag: Array
+    closest_decoy: V3
+    xi: V3
     wave: Array
 
 
-def aim(lane: Lane, s: State) -> Aim:
-    """The first half of a step (one lane): the closest point and the step's draws."""
-    x, dtype = lane.x, s.k.dtype
-    kind, center, orientation, dims, trig = lane.own
-    rot = quat.matrix_entries(orientation)
-    closest = shapes.project_components(kind, center, rot, dims, trig, s.p)
+def aim(lane: Lane, s: State, decoys: bool = True) -> Aim:
+    """The first half of a step (one lane): the closest points and the step's draws.
+    Without ``decoys`` (``Layout.switching``: no user of the batch changes its mind,
+    so every lane's first-headed task is its own) the second closest point is the
+    first."""
+    dtype = s.k.dtype
+
+    def closest(own):
+        kind, center, orientation, dims, trig = own
+        rot = quat.matrix_entries(orientation)
+        return shapes.project_components(kind, center, rot, dims, trig, s.p)
+
     draw = step_draws_of(lane.step_key, s.k.astype(jnp.int32), dtype)
-    return Aim(closest, sincos(x.user_noise * draw.noise), sincos(draw.axis_angle), draw.lag,
-               wave(lane, s.k + 1.0))
+    xi = (draw.xi[..., 0], draw.xi[..., 1], draw.xi[..., 2])
+    own = closest(lane.own)
+    return Aim(own, closest(lane.decoy_own) if decoys else own, xi, wave(lane, s.k + 1.0))
+
+
+def heading(lane: Lane, s: State, seen: Aim) -> tuple[Array | None, V3]:
+    """(whether the user heads for its own task at this step, the point it steers at):
+    a change of mind turns once the distance to the first-headed task's space has
+    fallen to (1 - user_switch_at) of its value at the start."""
+    x = lane.x
+    own = xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], seen.closest[i]))
+    if s.turned is None or s.d0 is None:  # no change of mind (Layout.switching)
+        return None, own
+    near = length(xyz(lambda i: seen.closest_decoy[i] - s.p[i])) <= \
+        (1.0 - x.user_switch_at) * s.d0
+    turned = s.turned | near
+    decoy = xyz(lambda i: jnp.where(x.user_aim_object, lane.decoy_aim[i],
+                                    seen.closest_decoy[i]))
+    return turned, xyz(lambda i: jnp.where(turned, own[i], decoy[i]))
 
 
 def move(lane: Lane, s: State, seen: Aim) -> Move:
-    """One step of the user, without any check (one lane), on components."""
+    """One step of the user, without any check (one lane), on components (module
+    docstring, points 2 to 6)."""
     x, dtype = lane.x, s.k.dtype
     step_length = am.rollout_numbers(x, dtype)["step_length"]
-    c = xyz(lambda i: jnp.where(x.user_aim_object, lane.aim[i], seen.closest[i]))
+    turned, c = heading(lane, s, seen)
     d = xyz(lambda i: c[i] - s.p[i])
     norm = length(d)
     moving = norm > 0
     u = xyz(lambda i: d[i] / jnp.where(moving, norm, 1.0))
-    turned = _turn_across(u[0], u[1], u[2], seen.angle, seen.axis)
-    size = jnp.minimum(step_length, norm)
-    lagging = (s.k > 0) & (seen.lag < x.user_lag)
-    delta = xyz(lambda i: jnp.where(lagging, s.last[i],
-                                    jnp.where(moving, size * turned[i], 0.0)))
+    cmd = turn_by(u, s.w)  # the commanded direction
+    if s.mode is None:  # no joystick in the program (Layout.joystick): 3-D input
+        mode = pause = None
+        size = jnp.minimum(step_length, norm)
+        delta = xyz(lambda i: jnp.where(moving, size * cmd[i], 0.0))
+    else:
+        mode, pause, delta = _joystick(lane, s, norm, cmd, moving, step_length)
     k = s.k + 1.0
     q = xyz(lambda i: s.q[i] + delta[i])
     # A perfect user's lane takes the closed form's samples (the same points).
@@ -143,4 +171,37 @@ def move(lane: Lane, s: State, seen: Aim) -> Move:
     travelled = jnp.where(lane.perfect, jnp.minimum(k * step_length, lane.length),
                           s.travelled + length(delta))
     gap = xyz(lambda i: p[i] - s.p[i])
-    return Move(k, q, p, delta, travelled, s.moved + length(gap))
+    w = xyz(lambda i: lane.ou_a * s.w[i] + lane.ou_b * seen.xi[i])
+    return Move(k, q, p, delta, travelled, s.moved + length(gap), w, mode, pause, turned)
+
+
+def _joystick(lane: Lane, s: State, norm: Array, cmd: V3, moving: Array,
+              step_length: Array) -> tuple[Array, Array, V3]:
+    """The two-mode joystick's step (module docstring, point 5): (mode, pause, the
+    displacement)."""
+    x = lane.x
+    assert s.mode is not None and s.pause is not None  # Layout.joystick
+    # The two-mode joystick: the command's horizontal and vertical parts.
+    horizontal = norm * jnp.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1])
+    vertical = norm * jnp.abs(cmd[2])
+    undecided = s.mode < 0
+    mode = jnp.where(undecided, jnp.where(vertical > horizontal, 1, 0), s.mode)
+    current = jnp.where(mode == 0, horizontal, vertical)
+    other = jnp.where(mode == 0, vertical, horizontal)
+    waiting = s.pause > 0
+    switch = x.user_input_modes & ~waiting & ~undecided & moving & (current < 0.5 * other)
+    mode = jnp.where(switch, 1 - mode, mode)
+    pause = jnp.where(waiting, s.pause - 1,
+                      jnp.where(switch, jnp.maximum(lane.switch_steps - 1, 0), 0))
+    still = x.user_input_modes & (waiting | (switch & (lane.switch_steps > 0)))
+    # Along the command (3-D input), or along the current mode's part of it.
+    masked = xyz(lambda i: cmd[i] * jnp.where((mode == 0) == (i < 2), 1.0, 0.0))
+    masked_len = length(masked)
+    part_len = jnp.where(x.user_input_modes, norm * masked_len, norm)
+    size = jnp.minimum(step_length, part_len)
+    unit = xyz(lambda i: jnp.where(x.user_input_modes,
+                                   masked[i] / jnp.where(masked_len > 0, masked_len, 1.0),
+                                   cmd[i]))
+    go = moving & ~still & (part_len > 0)
+    delta = xyz(lambda i: jnp.where(go, size * unit[i], 0.0))
+    return mode.astype(s.mode.dtype), pause.astype(s.pause.dtype), delta

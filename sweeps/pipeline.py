@@ -13,8 +13,9 @@ import shacc_jax
 from geometry_precompute import BakedScenes, PrecomputeResult
 from geometry_precompute.baking import bake
 from geometry_precompute.population import POPULATED
+from geometry_precompute.settings import describe_user
 from shacc_jax.optimize import winner_name
-from shacc_jax.types import OUTCOMES, Evaluation, Search
+from shacc_jax.types import ASSISTANCE, OUTCOMES, Evaluation, Search
 from sweeps import compile_cache
 from sweeps.output import precompute_json, provenance
 
@@ -104,17 +105,24 @@ def scene_json(ev: Evaluated, s: int) -> dict:
         code = ro.outcome[s, m, :, :T]
         act = ro.activated[s, m, :, :T]
         dr = ro.delta_R[s, m, :, :T]
+        dt = float(ev.baked.dt[s])
         modes[mode] = {
             "success_rate": float(me.u_scene[s, m]),
             "delta_R_mean": _none_if_nan(float(me.delta_R_mean[s, m])),
+            "time_to_activation_mean": _none_if_nan(float(me.time_mean[s, m])),
+            "path_length_mean": _none_if_nan(float(me.path_length_mean[s, m])),
+            "assistance": {k: _none_if_nan(float(v))
+                           for k, v in zip(ASSISTANCE, me.assist_fraction[s, m], strict=True)},
             "outcome": [[OUTCOMES[c] for c in row] for row in code.tolist()],
             "activated": [[ids[a] if a >= 0 else None for a in row] for row in act.tolist()],
             "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
+            "time_to_activation": (ro.step[s, m, :, :T] * dt).tolist(),
+            "path_length": ro.path_length[s, m, :, :T].tolist(),
+            "assist_steps": ro.assist[s, m, :, :T].tolist(),
         }
     out["modes"] = modes
     user = ro.user
     if user is not None and user.shape[-1]:  # a population: each rollout's drawn values
-
         out["users"] = {k: user[s, 0, :, :T, i].tolist() for i, k in enumerate(POPULATED)}
     for m, mode in enumerate(ev.modes):
         modes[mode]["n_rollouts"] = int(me.n_rollouts[s, m])
@@ -123,6 +131,7 @@ def scene_json(ev: Evaluated, s: int) -> dict:
     out["tasks_detail"] = tasks_json(ev, s)
     if ev.search is not None:
         out["optimize"] = optimize_json(ev, s)
+    out["user"] = describe_user(r.settings)
     out["settings"] = r.settings.to_dict()
     out["provenance"] = ev.provenance
     return out

@@ -233,16 +233,13 @@ class Result:
     quat: np.ndarray  # R at the end (w, x, y, z)
 
 
-def turn_across(u, angle: float, axis_angle: float) -> np.ndarray:
-    """u turned by ``angle`` about a = cos(psi) e1 + sin(psi) e2 (scipy's rotation
-    vectors), the basis (e1, e2, u) right-handed and e1 from the world x axis (y where
-    |u_x| > 0.9): the convention the kernel's random numbers are defined in."""
-    h = np.array([0.0, 1.0, 0.0]) if abs(u[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
-    e1 = h - (h @ u) * u
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(u, e1)
-    axis = math.cos(axis_angle) * e1 + math.sin(axis_angle) * e2
-    return Rotation.from_rotvec(angle * axis).apply(u)
+def turn_across(u, w) -> np.ndarray:
+    """u turned by the rotation vector w's part across it (scipy's rotation vectors):
+    the wandering hand's turn of a commanded direction."""
+    u = np.asarray(u, float)
+    w = np.asarray(w, float)
+    across = w - (w @ u) * u
+    return Rotation.from_rotvec(across).apply(u)
 
 
 def first_entry(space: Space, a, b, tau: float) -> float | None:
@@ -281,31 +278,50 @@ def first_entry(space: Space, a, b, tau: float) -> float | None:
 
 @dataclass
 class User:
-    """A simulated user (the user_* settings) with its random numbers, given as arrays
-    (the kernel's stream: ``shacc_jax.streams.user_draws``): per step |N(0, 1)|, the
-    noise axis' angle and the lag's uniform number; once per rollout the tremor's axis
-    and phase."""
+    """A simulated user (the user_* settings, reference/model "Simulated users") with
+    its random numbers, given as arrays (the kernel's stream:
+    ``shacc_jax.streams.user_draws``): per step the wandering hand's innovation xi (n, 3);
+    once per rollout the tremor's axis and phase, the hand's first vector in units of
+    user_noise, and the change of mind's two uniform numbers."""
 
     noise: float
-    lag: float
+    noise_tau: float
     tremor: float
     tremor_hz: float
-    steps: tuple  # (n,), (n,), (n,)
+    switch: float
+    switch_at: float
+    mode_switch_s: float
+    xi: np.ndarray
     tremor_axis: np.ndarray
     tremor_phase: float
-    aim: np.ndarray | None = None  # the task's aim point (user_aim = object), else None
+    noise0: np.ndarray
+    switch_u: float
+    other_u: float
+    modes: bool = False
+    aim: bool = False  # steers at the task's aim point (user_aim = object)
 
 
-def rollout(baked, scene: int, mode: str, start: int, target: int,
+def first_headed(user: User, target: int, n_tasks: int) -> int:
+    """The task a rollout heads for first: another of the scene's tasks, each as likely,
+    where its uniform number falls below user_switch (and the scene has another task);
+    else its own."""
+    if not (user.switch_u < user.switch and n_tasks > 1):
+        return target
+    j = min(int(user.other_u * (n_tasks - 1)), n_tasks - 2)
+    return j + 1 if j >= target else j
+
+
+def rollout(baked, scene: int, mode_name: str, start: int, target: int,
             user: User | None = None, swept: bool = False, mjcf: str | None = None) -> Result:
     """One rollout from baked arrays (float64), SPEC section 9 step by step; with
-    ``user``, the imperfect user of the model page's "Simulated users" (direction
-    noise, lag, tremor, aiming at the object) instead of the perfect one; with
+    ``user``, the imperfect user of the model page's "Simulated users" (a wandering
+    hand, a tremor, a two-mode joystick, a change of mind, aiming at the object) in
+    mode ``mode_name`` instead of the perfect one; with
     ``swept``, activation where the gripper's segment of a step first enters a space
     (the path length up to there, in proportion); with ``mjcf``, collisions against
     that MJCF's objects (the scene's export) instead of the baked ones."""
     T = int(baked.task_mask[scene].sum())
-    which = "init" if mode == "baseline" else "opt"
+    which = "init" if mode_name == "baseline" else "opt"
 
     def spaces(w):
         return [Space(int(baked.kind[scene, j]), getattr(baked, f"center_{w}")[scene, j],
@@ -334,7 +350,7 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
     def collided(step):
         return Result("collision", -1, step, p, np.nan, meta_steps, travelled, _wxyz(r))
 
-    q, last = p.copy(), np.zeros(3)
+    q = p.copy()
 
     def gripper(k):  # the commanded position plus the tremor at step k
         if user is None:
@@ -343,26 +359,61 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
         return q + user.tremor * wave * np.asarray(user.tremor_axis, float)
 
     p = gripper(0)
+    # The user's state: the wandering hand, the joystick's mode and pause, the change of
+    # mind (its first task, and the distance to that task's space at the start).
+    if user is not None:
+        decoy = first_headed(user, target, T)
+        turned = decoy == target
+        d0 = float(np.linalg.norm(active[decoy].project(p) - p))
+        w = user.noise * np.asarray(user.noise0, float)
+        a = math.exp(-dt / user.noise_tau) if user.noise_tau > 0 else 0.0
+        b = math.sqrt(max(1.0 - a * a, 0.0)) * user.noise
+        mode, pause = -1, 0
+        switch_steps = round(user.mode_switch_s / dt)
+        aims = baked.aim_point[scene]
     # Collision checks come first: a skill never activates at a penetrating pose.
     if collider is not None and collider.penetrates(p, r):
         return collided(0)
     sd, act = check(p)
     step = 0
     while act.size == 0 and step < max_steps:
-        c = active[target].project(p) if user is None or user.aim is None else user.aim
-        gap = np.linalg.norm(c - p)
-        if user is not None and step > 0 and user.steps[2][step] < user.lag:
-            move = last  # the previous step again
-        elif gap > 0:
-            u = (c - p) / gap
-            if user is not None:
-                u = turn_across(u, user.noise * user.steps[0][step], user.steps[1][step])
-            move = u * min(v_max * dt, gap)
+        if user is None:
+            c = active[target].project(p)
+            gap = np.linalg.norm(c - p)
+            move = (c - p) / gap * min(v_max * dt, gap) if gap > 0 else np.zeros(3)
         else:
-            move = np.zeros(3)
+            if not turned and np.linalg.norm(active[decoy].project(p) - p) <= \
+                    (1.0 - user.switch_at) * d0:
+                turned = True
+            heading = target if turned else decoy
+            c = aims[heading] if user.aim else active[heading].project(p)
+            gap = np.linalg.norm(c - p)
+            u = (c - p) / gap if gap > 0 else np.zeros(3)
+            cmd = turn_across(u, w) if gap > 0 else np.zeros(3)
+            horizontal, vertical = gap * np.linalg.norm(cmd[:2]), gap * abs(cmd[2])
+            undecided = mode < 0
+            if undecided:
+                mode = 1 if vertical > horizontal else 0
+            current, other = (horizontal, vertical) if mode == 0 else (vertical, horizontal)
+            waiting = pause > 0
+            switch = user.modes and not waiting and not undecided and gap > 0 and \
+                current < 0.5 * other
+            if switch:
+                mode = 1 - mode
+            pause = pause - 1 if waiting else (max(switch_steps - 1, 0) if switch else 0)
+            still = user.modes and (waiting or (switch and switch_steps > 0))
+            if user.modes:
+                part = cmd * (np.array([1.0, 1.0, 0.0]) if mode == 0 else
+                              np.array([0.0, 0.0, 1.0]))
+                part_len = gap * np.linalg.norm(part)
+                unit = part / np.linalg.norm(part) if part_len > 0 else np.zeros(3)
+            else:
+                part_len, unit = gap, cmd
+            go = gap > 0 and not still and part_len > 0
+            move = unit * min(v_max * dt, part_len) if go else np.zeros(3)
+            w = a * w + b * np.asarray(user.xi[step], float)
         step += 1
         q = q + move
-        last = move
         before, p = p, gripper(step)
         travelled += float(np.linalg.norm(move))
         if collider is not None and collider.penetrates(p, r):
@@ -379,16 +430,16 @@ def rollout(baked, scene: int, mode: str, start: int, target: int,
                 act = np.flatnonzero(sd <= tau + 1e-9)
         if act.size:
             break
-        if mode == "shacc":
+        if mode_name == "shacc":
             sd_init = np.array([s.sdf(p) for s in init])
             inside = [j for j in range(T) if cluster[j] >= 0 and sd_init[j] <= tau]
             if inside:
                 j0 = min(inside, key=lambda j: (sd_init[j], j))
                 members = [j for j in range(T) if cluster[j] == cluster[j0]]
                 d = np.array([max(opt[j].sdf(p), 1e-6) for j in members])
-                w = (1.0 / d**2) / np.sum(1.0 / d**2)
+                wt = (1.0 / d**2) / np.sum(1.0 / d**2)
                 rots = Rotation.concatenate([task_rotation(*orient[j], p) for j in members])
-                r = rotate_towards(r, rots.mean(weights=w), omega * dt)
+                r = rotate_towards(r, rots.mean(weights=wt), omega * dt)
                 meta_steps += 1
     if act.size == 0:
         return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled, _wxyz(r))

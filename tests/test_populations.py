@@ -28,9 +28,9 @@ BAD = [
     ({"user_noise": {"uniform": [0, 0.1], "values": [0]}}, "user_noise", "one key"),
     ({"user_noise": {"uniform": [0.3, 0.1]}}, "user_noise.uniform", "low <= high"),
     ({"user_noise": {"uniform": [0, 3.0]}}, "user_noise.uniform", "must be in [0, 1.5708]"),
-    ({"user_lag": {"uniform": [0, 1]}}, "user_lag.uniform", "must be in [0, 1)"),
-    ({"user_lag": {"normal": [0.2, 0]}}, "user_lag.normal", "sd must be > 0"),
-    ({"user_lag": {"normal": [0.2]}}, "user_lag.normal", "two numbers [mean, sd]"),
+    ({"user_switch_at": {"uniform": [0, 1]}}, "user_switch_at.uniform", "must be in (0, 1)"),
+    ({"user_switch": {"normal": [0.2, 0]}}, "user_switch.normal", "sd must be > 0"),
+    ({"user_switch": {"normal": [0.2]}}, "user_switch.normal", "two numbers [mean, sd]"),
     ({"user_tremor": {"values": []}}, "user_tremor.values", "1 to 16 values"),
     ({"user_tremor": {"values": list(np.linspace(0, 0.01, 17))}}, "user_tremor.values",
      "1 to 16 values"),
@@ -60,11 +60,11 @@ def test_populations_are_settings_as_files_and_the_command_line_write_them():
     """A population is read from a settings table (also nested, which TOML makes of a
     dotted key), from ``--set NAME={...}``, and written back as the same table; the
     schema accepts what the loader does; the other settings refuse tables."""
-    table = {"user_noise": {"uniform": [0, 0.4]}, "user_lag": {"normal": [0.2, 0.1]},
+    table = {"user_noise": {"uniform": [0, 0.4]}, "user_switch": {"normal": [0.2, 0.1]},
              "user_tremor": {"values": [0, 0.01]}, "user_tremor_hz": 4}
     s = DEFAULTS.with_overrides(table)
     assert s["user_noise"] == Population("uniform", (0.0, 0.4))
-    assert s.to_dict()["user_lag"] == {"normal": [0.2, 0.1]}
+    assert s.to_dict()["user_switch"] == {"normal": [0.2, 0.1]}
     assert Draft202012Validator(settings_schema()).is_valid(table)
     assert parse_cli_value("user_tremor", "{values = [0, 0.01]}") == {"values": [0, 0.01]}
     with pytest.raises(InputError, match="<--set>: user_noise: a population is an inline"):
@@ -115,9 +115,10 @@ def _draws(kind: str, numbers, name: str, n: int = 4000) -> np.ndarray:
     """``n`` rollouts' draws of one setting's population, by the kernel's function."""
     i = POPULATED.index(name)
     code, args, values = encode(Population(kind, tuple(numbers)), *population_range(name))
-    dist = np.zeros(4, np.int32)
+    U = len(POPULATED)
+    dist = np.zeros(U, np.int32)
     dist[i] = code
-    a, v = np.zeros((4, 4), np.float32), np.zeros((4, 16), np.float32)
+    a, v = np.zeros((U, 4), np.float32), np.zeros((U, 16), np.float32)
     a[i], v[i] = args, values
     x = Params._make(jnp.zeros(()) for _ in Params._fields)._replace(
         user_dist=jnp.asarray(dist), user_dist_args=jnp.asarray(a),
@@ -134,9 +135,9 @@ def test_draws_follow_their_distributions():
     got = _draws("uniform", (0.1, 0.4), "user_noise")
     assert got.min() >= 0.1 and got.max() < 0.4
     assert stats.kstest(got, stats.uniform(0.1, 0.3).cdf).pvalue > 1e-3
-    lo, hi = population_range("user_lag")
+    lo, hi = population_range("user_switch")
     mean, sd = 0.1, 0.2  # a quarter of the mass below 0 is cut away
-    got = _draws("normal", (mean, sd), "user_lag")
+    got = _draws("normal", (mean, sd), "user_switch")
     assert got.min() >= lo and got.max() <= hi
     truncated = stats.truncnorm((lo - mean) / sd, (hi - mean) / sd, loc=mean, scale=sd)
     assert stats.kstest(got, truncated.cdf).pvalue > 1e-3
@@ -162,17 +163,17 @@ def test_a_population_sweep_records_each_rollouts_user(tmp_path):
                    "seed": 4},
         "settings": {"start_grid": [2, 2], "user_tremor": 0.004},
         "axes": {"user_noise": [0.1, {"uniform": [0.0, 0.4]}],
-                 "user_lag": [{"values": [0.0, 0.3]}]}}, "cfg.toml", tmp_path)
+                 "user_switch": [{"values": [0.0, 0.3]}]}}, "cfg.toml", tmp_path)
     run_sweep(cfg, tmp_path / "out", None, workers=1, progress=False)
     scenes = pd.read_parquet(tmp_path / "out" / "scenes")
     assert sorted(set(scenes["set.user_noise"])) == ["0.1", "uniform(0, 0.4)"]
-    assert set(scenes["set.user_lag"]) == {"values(0, 0.3)"}
+    assert set(scenes["set.user_switch"]) == {"values(0, 0.3)"}
     rollouts = ds.dataset(tmp_path / "out" / "rollouts").to_table().to_pandas()
     assert len(rollouts) == 2 * 2 * 2 * 4 * 3
     first, second = (rollouts[rollouts.point == p] for p in (0, 1))
     assert (first.user_noise == np.float32(0.1)).all()
     assert second.user_noise.between(0, 0.4).all() and second.user_noise.nunique() > 10
-    assert set(rollouts.user_lag) == {0.0, np.float32(0.3)}
+    assert set(rollouts.user_switch) == {0.0, np.float32(0.3)}
     assert (rollouts.user_tremor == np.float32(0.004)).all()
     per_mode = second.pivot_table(index=["scene_index", "start", "task"], columns="mode",
                                   values="user_noise", observed=True)
@@ -185,9 +186,14 @@ def test_a_population_bake_has_its_codes_and_the_layout_steps():
 
     scene = load_scene(shipped_scene_paths()[0])
     r = precompute(scene, scene.settings(DEFAULTS, {"start_grid": [2, 2],
-                                                    "user_lag": {"values": [0.1, 0.2]}}))
+                                                    "user_switch": {"values": [0.1, 0.2]}}))
     b = bake([r])
-    assert b.user_dist[0].tolist() == [0, 3, 0, 0]
-    assert b.user_dist_args[0, 1, 0] == 2 and b.user_dist_values[0, 1, :2].tolist() == [0.1, 0.2]
+    i = POPULATED.index("user_switch")
+    assert b.user_dist[0].tolist() == [3 if j == i else 0 for j in range(len(POPULATED))]
+    assert b.user_dist_args[0, i, 0] == 2 and b.user_dist_values[0, i, :2].tolist() == [0.1, 0.2]
     layout = b.layout()
-    assert layout.populations and layout.stepped_users
+    assert layout.populations and layout.stepped_users and layout.switching
+    # A batch whose users never change their mind traces no first-headed task.
+    plain = bake([precompute(scene, scene.settings(DEFAULTS, {"start_grid": [2, 2],
+                                                              "user_noise": 0.2}))])
+    assert plain.layout().stepped_users and not plain.layout().switching

@@ -2,9 +2,9 @@
 by ``data/make_evaluation_reference.py``): every rollout field and metric of the
 shipped, extra and 16 random scenes, with collision checks off and on and with an
 imperfect user, as the reference promises across processors and JAX versions
-(docs/reference/outputs.md, "Reproducibility"): outcomes, activated tasks, steps and
-rates exactly, positions and path lengths within 1e-6 m, orientations (per component,
-up to sign) and delta_R within 1e-5."""
+(docs/reference/outputs.md, "Reproducibility"): outcomes, activated tasks, steps, the
+steps under each assistance and rates exactly, positions and path lengths within 1e-6
+m, orientations (per component, up to sign) and delta_R within 1e-5."""
 
 from __future__ import annotations
 

@@ -30,6 +30,7 @@ tasks = [3, 4]
 seed = 11
 [settings]
 start_grid = [2, 2]
+user_noise = { uniform = [0.0, 0.4] }
 [axes]
 v_max = [0.15, 0.3]
 shrink_step = [0.01, 0.02]
@@ -87,6 +88,23 @@ def test_sweep_report_numbers_are_the_datasets(sweep_folder):
             row = re.search(rf"<tr><td class=\"l\">{point}</td><td class=\"l\">[^<]*</td>"
                             rf"<td class=\"l\">{mode}</td><td class=\"\">([0-9.]+) ", html)
             assert row and float(row.group(1)) == pytest.approx(mean, abs=5e-4)
+    # Time, path and assistance per point and mode: the mean over scenes of the
+    # scenes table's columns; the shares of one mode sum to one.
+    for (point, ), g in scenes.groupby(["point"]):
+        for mode in ("baseline", "shacc"):
+            row = re.search(rf'<table class="time">.*?<tr><td class="l">{point}</td>'
+                            rf'<td class="l">{mode}</td>((?:<td class="">[^<]*</td>)+)',
+                            html, re.S)
+            cells = [float(c.split()[0]) for c in re.findall(r'<td class="">([^<]*)</td>',
+                                                               row.group(1))]
+            assert cells[0] == pytest.approx(g[f"{mode}.time_mean"].mean(), abs=5e-3)
+            assert cells[1] == pytest.approx(g[f"{mode}.path_length_mean"].mean(), abs=5e-4)
+            assert sum(cells[2:]) == pytest.approx(1.0, abs=2e-3)
+    # The population's draws, per point: success binned by the drawn noise.
+    assert "Success against the drawn users" in html
+    for point in scenes["point"].unique():
+        assert f"point {point}: Direction noise (rad), as drawn: ShaCC" in html
+    assert html.count('<table class="drawn">') == scenes["point"].nunique()
     # Nothing from outside the page.
     assert not re.search(r"(src|href)=\"(https?:)?//", html)
     assert html.count("<img") == 4  # per-point bars (few points), two axes, one heat map

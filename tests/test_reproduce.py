@@ -110,10 +110,14 @@ def test_robustness_section(quick_run):
         assert entry["verdict"]["shacc"] == robustness.verdict(entry["rows"], "shacc")
         assert entry["sentence"] in (out / "report.md").read_text()
     # The perfect row is the main evaluation's: its ShaCC success is the table's.
-    assert section["user_noise"]["rows"][0]["modes"]["shacc"]["u_scene"]["mean"] == \
+    assert section["user_tremor"]["rows"][0]["modes"]["shacc"]["u_scene"]["mean"] == \
         pytest.approx(s["categories"]["all"]["shacc"]["u_scene"]["mean"])
-    # A noisy user changes something.
-    noisy = section["user_noise"]["rows"]
+    # The wandering hand starts from white noise of the same size (not the perfect
+    # user), and a wandering hand changes something.
+    assert section["user_noise_tau"]["rows"][0]["modes"]["shacc"]["u_scene"]["mean"] != \
+        pytest.approx(s["categories"]["all"]["shacc"]["u_scene"]["mean"])
+    assert "at 0.0," in section["user_noise_tau"]["sentence"]
+    noisy = section["user_noise_tau"]["rows"]
     assert any(noisy[0]["modes"][m]["u_scene"]["mean"] != noisy[1]["modes"][m]["u_scene"]["mean"]
                for m in ("baseline", "shacc"))
     assert (out / "robustness.png").stat().st_size > 10_000

@@ -25,7 +25,8 @@ def test_every_spec_name_present():
              "drawer_pull.depth_min", "optimize_starts", "optimize_seed",
              "optimize_population", "optimize_generations", "optimize_validation_starts",
              "optimize_validation_seed", "optimize_candidates", "optimize_selection",
-             "user_noise", "user_lag", "user_tremor", "user_tremor_hz", "user_aim",
+             "user_noise", "user_noise_tau", "user_tremor", "user_tremor_hz", "user_input",
+             "user_mode_switch_s", "user_switch", "user_switch_at", "user_aim",
              "activation_check"}
     assert set(SPECS) == names
     assert DEFAULTS["dt"] == 0.02 and DEFAULTS["start_grid"] == (6, 6)
@@ -210,6 +211,6 @@ def test_every_number_has_a_unit_where_it_has_one():
 
     units = {s.name: s.unit for s in SPECS.values()}
     assert units["v_max"] == "m/s" and units["dt"] == "s" and units["user_noise"] == "rad"
-    assert units["side_grasp.radius_init"] == "m" and units["user_lag"] == ""
+    assert units["side_grasp.radius_init"] == "m" and units["user_switch"] == ""
     assert units["max_steps"] == "" and units["ambiguity"] == ""
     assert {r["name"]: r["unit"] for r in describe()} == units

@@ -62,10 +62,14 @@ def test_a_chunks_tables_import_no_pandas():
         ro = SimpleNamespace(outcome=rng.integers(-1, 5, (S, M, N, T)).astype(np.int8),
                              activated=rng.integers(-1, T, (S, M, N, T)),
                              step=rng.integers(0, 99, (S, M, N, T)),
-                             delta_R=rng.random((S, M, N, T)))
+                             delta_R=rng.random((S, M, N, T)),
+                             path_length=rng.random((S, M, N, T)),
+                             assist=rng.integers(0, 50, (S, M, N, T, 4)))
         me = SimpleNamespace(u_scene=rng.random((S, M)),
                              delta_R_mean=np.where(rng.random((S, M)) < .5, np.nan, 1.0),
-                             outcome_counts=rng.integers(0, 9, (S, M, 5)))
+                             outcome_counts=rng.integers(0, 9, (S, M, 5)),
+                             time_mean=rng.random((S, M)), path_length_mean=rng.random((S, M)),
+                             assist_fraction=rng.random((S, M, 4)))
         labels = {"name": [f"s{i}" for i in range(S)], "n_tasks": [T] * S,
                   **{k: rng.random(S) for k in ("C_init", "C_final", "d", "h")},
                   **{k: [[f"{k}{t}" for t in range(T)]] * S for k in
@@ -78,10 +82,13 @@ def test_a_chunks_tables_import_no_pandas():
                                 labels, me)
         t = tables.tasks_table(0, modes, range(S), labels, params, ro.outcome)
         st = tables.starts_table(0, range(S), rng.random((S, N, 7)))
-        r = tables.rollouts_table(0, modes, range(S), ro)
+        r = tables.rollouts_table(0, modes, range(S), ro, np.full(S, 0.02))
         assert all(len(tables.parquet_bytes(x, n)) for x, n in
                    ((s, "scenes"), (t, "tasks"), (st, "starts"), (r, "rollouts")))
         assert s.column("set.omega_max").null_count == S
+        assert s.column("shacc.assist_wrong").to_pylist() == list(me.assist_fraction[:, 2, 3])
+        steps = np.array(r.column("steps").to_pylist())  # to_numpy() would import pandas
+        np.testing.assert_allclose(r.column("time").to_pylist(), steps * 0.02, rtol=1e-6)
         assert s.column("set.start_grid").to_pylist() == [[2, 1]] * S
         assert t.column("q_optimized").null_count == S * T
         assert t.column("param_names").to_pylist()[:3] == [["radius"], ["length", "half_angle"],

@@ -6,6 +6,7 @@ batch, the mode and the device split."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from functools import partial
 
@@ -30,22 +31,35 @@ from shacc_jax import runplan, stepping, streams, user_models
 
 # A population: each rollout draws its own user (the reference is given the values the
 # kernel reports it drew).
-POPULATION = {"user_noise": {"uniform": [0.0, 0.4]}, "user_lag": {"values": [0.0, 0.3]},
+POPULATION = {"user_noise": {"uniform": [0.0, 0.4]}, "user_noise_tau": {"values": [0.0, 0.4]},
               "user_tremor": {"normal": [0.008, 0.004]},
-              "user_tremor_hz": {"uniform": [2.0, 6.0]}}
+              "user_tremor_hz": {"uniform": [2.0, 6.0]}, "user_switch": {"values": [0.0, 1.0]},
+              "user_switch_at": {"uniform": [0.3, 0.7]}}
 USERS = {
     "noise": {"user_noise": 0.3},
-    "lag": {"user_lag": 0.3},
+    "wander": {"user_noise": 0.3, "user_noise_tau": 0.5},
     "tremor": {"user_tremor": 0.01, "user_tremor_hz": 3.0},
-    "all": {"user_noise": 0.2, "user_lag": 0.2, "user_tremor": 0.008},
+    "modes": {"user_input": "modes", "user_mode_switch_s": 0.1},
+    "switch": {"user_switch": 1.0, "user_switch_at": 0.6},
+    "all": {"user_noise": 0.2, "user_noise_tau": 0.3, "user_tremor": 0.008,
+            "user_input": "modes", "user_switch": 0.5},
     "object": {"user_aim": "object"},
-    "object-noisy": {"user_aim": "object", "user_noise": 0.2},
+    "object-noisy": {"user_aim": "object", "user_noise": 0.2, "user_switch": 1.0},
     "swept": {"activation_check": "swept"},
     # Every parameter at once, drawn per rollout, with the swept check or with collisions
     # (one program each: the fixed values take the same code as a population's draws).
-    "swept-population": {"activation_check": "swept", **POPULATION},
+    "swept-population": {"activation_check": "swept", "user_input": "modes", **POPULATION},
     "collision-population": {"collision": "on", **POPULATION},
 }
+
+
+def reference_user(overrides: dict, values, steps, once, n: int, t: int):
+    """The NumPy Automaton's user of rollout (n, t): the user settings (``values``, in
+    POPULATED's order) and the kernel's random numbers of that rollout."""
+    return User(*values, steps.xi[n, t], once.tremor_axis[n, t],
+                float(once.tremor_phase[n, t]), once.noise0[n, t], float(once.switch[n, t]),
+                float(once.other[n, t]), overrides.get("user_input") == "modes",
+                overrides.get("user_aim") == "object")
 
 
 def _evaluate(baked, x64=False, **layout):
@@ -139,12 +153,8 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
                         assert (drawn == drawn[0]).all()  # one user in every mode
                         values = [float(v) for v in drawn[0]]
                     else:
-                        values = [overrides.get(k, 0.0) for k in POPULATED]
-                    user = User(*values,
-                                (steps.noise[n, t], steps.axis_angle[n, t], steps.lag[n, t]),
-                                once.tremor_axis[n, t], float(once.tremor_phase[n, t]),
-                                baked.aim_point[s, t] if overrides.get("user_aim") == "object"
-                                else None)
+                        values = [overrides.get(k, DEFAULTS[k]) for k in POPULATED]
+                    user = reference_user(overrides, values, steps, once, n, t)
                     for m, mode in enumerate(shacc_jax.MODES):
                         ref = rollout(baked, s, mode, n, t, user,
                                       swept=overrides.get("activation_check") == "swept")
@@ -212,24 +222,36 @@ def test_swept_activation_does_not_depend_on_the_speed(scenes):
     assert (two_at_once | earlier)[differ].all()
 
 
-def test_noise_angles_follow_their_distribution():
-    """The angle between a direction and its noisy version is |N(0, sigma^2)| and the
-    axis it turns about is uniform on the circle across it (Kolmogorov-Smirnov), from
-    the kernel's own random numbers and turning function."""
-    steps, _ = streams.user_draws(0, 12345, 2, 7, n_steps=4000)
-    sigma = 0.3
+def test_the_wandering_hand_is_an_ornstein_uhlenbeck_process():
+    """The kernel's stream drives w_{k+1} = a w_k + sqrt(1 - a^2) sigma xi_k: xi is
+    N(0, 1) per component (Kolmogorov-Smirnov); the process started at N(0, sigma^2 I)
+    stays there (stationary variance sigma^2 per component, within its sampling error)
+    with lag-one autocorrelation a = exp(-dt / tau) (within four standard errors); a = 0
+    (tau 0) is white noise. The turn is the reference's (scipy's rotation vectors)."""
+    sigma, dt = 0.3, 0.02
+    draw = jax.vmap(lambda start: streams.user_draws(3, 99, 0, start, n_steps=400))
+    steps, once = draw(np.arange(200, dtype=np.int32))
+    xi, w0 = np.asarray(steps.xi, float), np.asarray(once.noise0, float)  # (R, n, 3), (R, 3)
+    assert stats.kstest(xi.ravel(), stats.norm.cdf).pvalue > 1e-3
+    assert stats.kstest(w0.ravel(), stats.norm.cdf).pvalue > 1e-3
+    for tau in (0.0, 0.1, 0.5):
+        a = math.exp(-dt / tau) if tau else 0.0
+        w = np.empty((xi.shape[0], xi.shape[1] + 1, 3))
+        w[:, 0] = sigma * w0
+        for k in range(xi.shape[1]):
+            w[:, k + 1] = a * w[:, k] + math.sqrt(1 - a * a) * sigma * xi[:, k]
+        var = w.var()
+        assert abs(var / sigma**2 - 1) < 4 * math.sqrt(2 / (w.size / (1 + 2 * a / (1 - a)))), tau
+        x0, x1 = w[:, :-1].ravel(), w[:, 1:].ravel()
+        rho = np.corrcoef(x0, x1)[0, 1]
+        assert abs(rho - a) < 4 / math.sqrt(x0.size) * (1 + a), (tau, rho, a)
     u = np.array([0.3, -0.5, 0.81])
     u /= np.linalg.norm(u)
-    turned = np.asarray(jax.vmap(lambda a, psi: user_models.turn_across(
-        np.asarray(u, np.float32), sigma * a, psi))(steps.noise, steps.axis_angle))
-    angle = np.arccos(np.clip(turned @ u, -1, 1))
-    assert stats.kstest(angle, stats.halfnorm(scale=sigma).cdf).pvalue > 1e-3
-    assert stats.kstest(np.asarray(steps.axis_angle), stats.uniform(0, 2 * np.pi).cdf
-                        ).pvalue > 1e-3
-    # The kernel's turn is the reference's (scipy's rotation vectors).
-    noise, psi = (np.asarray(a[:50], float) for a in (steps.noise, steps.axis_angle))
-    ref = np.array([turn_across(u, sigma * a, b) for a, b in zip(noise, psi, strict=True)])
-    np.testing.assert_allclose(turned[:50], ref, atol=2e-6)
+    ws = sigma * xi[0, :50]
+    turned = np.asarray(jax.vmap(lambda v: user_models.turn_across(
+        jnp.asarray(u, jnp.float32), v.astype(jnp.float32)))(jnp.asarray(ws)))
+    ref = np.array([turn_across(u, v) for v in ws])
+    np.testing.assert_allclose(turned, ref, atol=2e-6)
 
 
 def test_step_draws_are_jax_threefry():
@@ -249,27 +271,34 @@ def test_step_draws_are_jax_threefry():
         kk = k.astype(jnp.uint32)
         words = threefry_2x32(step_key, jnp.stack([kk, kk, jnp.zeros_like(kk),
                                                     jnp.ones_like(kk)]))
-        u = (words[:3] >> 8).astype(jnp.float32) * (1.0 / (1 << 24))
-        return (jnp.sqrt(2.0) * jax.scipy.special.erfinv(u[0]), 2.0 * jnp.pi * u[1], u[2])
+        u = ((words[:3] >> 8).astype(jnp.float32) + 0.5) * (1.0 / (1 << 24))
+        return jnp.sqrt(2.0) * jax.scipy.special.erfinv(2.0 * u - 1.0)
 
     def ours(seed, k):
-        return tuple(streams.step_draws(streams.rollout_key(*seed), k, jnp.float32))
+        return streams.step_draws(streams.rollout_key(*seed), k, jnp.float32).xi
 
     seeds = jnp.asarray(seeds)
-    for a, b in zip(jax.vmap(ours)(seeds, k), jax.vmap(theirs)(seeds, k), strict=True):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(np.asarray(jax.vmap(ours)(seeds, k)),
+                                  np.asarray(jax.vmap(theirs)(seeds, k)))
 
 
-def test_lag_repeats_a_step_with_its_probability():
-    """Over many steps and rollouts a step lags (its uniform number below user_lag)
-    with probability user_lag (binomial test), and the tremor axes are uniform on the
+def test_a_change_of_mind_happens_with_its_probability():
+    """Over many rollouts a change of mind happens (its uniform number below
+    user_switch) with probability user_switch (binomial test), the first-headed task is
+    each other task as often (chi-square), and the tremor axes are uniform on the
     sphere (their z uniform in [-1, 1])."""
-    draw = jax.vmap(lambda start: streams.user_draws(3, 99, 0, start, n_steps=200))
-    steps, once = draw(np.arange(100, dtype=np.int32))
-    lag = np.asarray(steps.lag)
+    from reference_automaton import first_headed
+
+    draw = jax.vmap(lambda start: streams.user_draws(3, 99, 0, start, n_steps=1))
+    _, once = draw(np.arange(4000, dtype=np.int32))
+    u = np.asarray(once.switch)
     for p in (0.05, 0.2, 0.5):
-        k = int((lag < p).sum())
-        assert stats.binomtest(k, lag.size, p).pvalue > 1e-3, (p, k, lag.size)
+        k = int((u < p).sum())
+        assert stats.binomtest(k, u.size, p).pvalue > 1e-3, (p, k, u.size)
+    user = User(0, 0, 0, 5, 1.0, 0.5, 0.5, None, None, 0, None, 0.0, 0.0)
+    firsts = [first_headed(replace(user, other_u=float(o)), 2, 5) for o in np.asarray(once.other)]
+    counts = np.bincount(firsts, minlength=5)
+    assert counts[2] == 0 and stats.chisquare(counts[[0, 1, 3, 4]]).pvalue > 1e-3
     axes = np.asarray(once.tremor_axis)
     np.testing.assert_allclose(np.linalg.norm(axes, axis=1), 1.0, atol=1e-6)
     assert stats.kstest(axes[:, 2], stats.uniform(-1, 2).cdf).pvalue > 1e-3
@@ -323,12 +352,15 @@ def test_the_perfect_user_stepped_with_collision_checks_is_the_closed_form(scene
 
 
 def test_user_settings_have_ranges():
-    for name, bad in (("user_noise", 10.0), ("user_lag", 1.0), ("user_tremor", 1.0),
+    for name, bad in (("user_noise", 10.0), ("user_noise_tau", -1.0), ("user_tremor", 1.0),
                       ("user_tremor_hz", 0.0), ("user_noise", -0.1), ("user_aim", "gaze"),
+                      ("user_switch", 1.5), ("user_switch_at", 1.0), ("user_switch_at", 0.0),
+                      ("user_input", "2d"), ("user_mode_switch_s", -0.5),
                       ("activation_check", "both")):
         with pytest.raises(InputError, match=name):
             DEFAULTS.with_overrides({name: bad})
     # Imperfect users are checked for collisions; the swept check is not.
-    DEFAULTS.with_overrides({"collision": "on", "user_lag": 0.1, "user_aim": "object"})
+    DEFAULTS.with_overrides({"collision": "on", "user_switch": 0.5, "user_aim": "object",
+                             "user_input": "modes"})
     with pytest.raises(InputError, match=r"activation_check.*collision"):
         DEFAULTS.with_overrides({"collision": "on", "activation_check": "swept"})

@@ -169,6 +169,8 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     body += ["<h2>Paired differences between modes</h2>",
              _table(["point", "difference", "metric", "mean [95 % CI]", "scenes"],
                     _paired_rows(scenes, modes, True, n_boot), left=3, cls="paired")]
+    body += _how_long_sweep(scenes, modes, n_boot)
+    body += _drawn_sweep(folder, modes, n_boot)
     # Tasks, by template and object kind (the scenes' own task ids differ).
     if (folder / "tasks").is_dir():
         tasks = pd.read_parquet(folder / "tasks")
@@ -222,6 +224,90 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     return _page(f"Sweep {name}", body)
 
 
+HOW_LONG_NOTE = ("the mean time to activation (s) and path length (m) of the successful "
+                 "approaches, and the share of the approaches' steps under each kind of "
+                 "assistance (none; scene: the meta skill; correct and wrong: assistance "
+                 "towards the intended or another task)")
+
+
+DRAWN_NOTE = ("The approaches binned by quartiles of each drawn user setting; per bin the "
+              "mean over scenes of each scene's success in it, and the paired difference "
+              "to the baseline (95 % CI over scenes).")
+
+
+def _drawn_table(entry: dict, modes: list[str], lead: str = "") -> str:
+    """One drawn parameter's bins (success per mode, difference to the baseline) and its
+    sentence."""
+    others = [m for m in modes if m != "baseline"]
+    return _table(["bin"] + [f"{m} success" for m in modes]
+                  + [f"{m} - baseline" for m in others],
+                  [[r["level"]] + [_ci(r["modes"][m]["u_scene"]) for m in modes]
+                   + [_ci(r["vs_baseline"][m], 3, True) for m in others]
+                   for r in entry["rows"]], left=1, cls="drawn") + \
+        f'<p>{_e(lead + entry["sentence"])}</p>'
+
+
+def _how_long_sweep(scenes, modes: list[str], n_boot: int) -> list[str]:
+    """Per point and mode: time, path and the assistance shares, each the mean over
+    scenes with its CI (empty for a dataset written before these columns)."""
+    from geometry_precompute.schema import ASSISTANCE  # deferred: 20 ms to import
+
+    cols = ["time_mean", "path_length_mean"] + [f"assist_{k}" for k in ASSISTANCE]
+    if not all(f"{m}.{c}" in scenes.columns for m in modes for c in cols):
+        return []
+    rows = []
+    for p, g in scenes.groupby("point", sort=True):
+        for mode in modes:
+            rows.append([p, mode] + [_ci(group_means(g, ["point"], f"{mode}.{c}", n_boot)[0],
+                                         2 if c == "time_mean" else 3) for c in cols])
+    return ["<h2>How long, and how assisted</h2>",
+            f'<p class="note">Per point and mode: {HOW_LONG_NOTE}; each the mean over '
+            "scenes [95 % CI].</p>",
+            _table(["point", "mode", "time (s)", "path (m)"]
+                   + [f"assisted: {k}" for k in ASSISTANCE], rows, left=2, cls="time")]
+
+
+def _drawn_sweep(folder: Path, modes: list[str], n_boot: int) -> list[str]:
+    """Success against the drawn users of a sweep with a population: per point,
+    :func:`sweeps.analysis.robustness.drawn` of its rollouts table."""
+    import pyarrow.dataset as ds  # deferred: 0.2 s to import
+
+    from geometry_precompute.population import POPULATED  # deferred: 20 ms to import
+    from geometry_precompute.schema import OUTCOMES  # deferred: 20 ms to import
+    from sweeps.analysis.robustness import drawn  # deferred: the pipeline's import
+
+    if not (folder / "rollouts").is_dir() or "baseline" not in modes or len(modes) < 2:
+        return []
+    data = ds.dataset(folder / "rollouts", format="parquet")
+    names = [n for n in POPULATED if n in data.schema.names]
+    if not names:
+        return []
+    table = data.to_table(columns=["point", "scene_index", "mode", "start", "task",
+                                   "outcome", *names]).to_pandas()
+    code = {o: i for i, o in enumerate(OUTCOMES)}
+    out: list[str] = []
+    for p, g in table.groupby("point", sort=True):
+        g = g[g["mode"].astype(str).isin(modes)]
+        scene = g["scene_index"].to_numpy()
+        si = np.unique(scene, return_inverse=True)[1]
+        S, N, T = si.max() + 1, g["start"].max() + 1, g["task"].max() + 1
+        mi = g["mode"].astype(str).map({m: i for i, m in enumerate(modes)}).to_numpy()
+        n, t = g["start"].to_numpy(), g["task"].to_numpy()
+        outcome = np.full((S, len(modes), N, T), -1, np.int8)
+        outcome[si, mi, n, t] = g["outcome"].astype(str).map(code).to_numpy()
+        user = np.zeros((S, len(modes), N, T, len(POPULATED)))
+        for name in names:
+            user[si, mi, n, t, POPULATED.index(name)] = g[name].to_numpy(float)
+        mask = np.zeros((S, T), bool)
+        mask[si, t] = True
+        for entry in drawn(outcome, user, mask, modes, n_boot).values():
+            out.append(_drawn_table(entry, modes, f"point {p}: "))
+    if not out:
+        return []
+    return ["<h2>Success against the drawn users</h2>", f'<p class="note">{DRAWN_NOTE}</p>',
+            *out]
+
+
 def _part_provenance(folder: Path) -> list:
     import pyarrow.parquet as pq  # deferred: 100 ms to import
 
@@ -236,9 +322,38 @@ def _part_provenance(folder: Path) -> list:
     return seen
 
 
+def _drawn_json(lines: list[dict], modes: list[str], n_boot: int) -> dict:
+    """:func:`sweeps.analysis.robustness.drawn` of the scenes of an ``evaluate --json``
+    file that drew their users from a population (tasks padded to the longest scene)."""
+    from geometry_precompute.population import POPULATED  # deferred: 20 ms to import
+    from geometry_precompute.schema import OUTCOMES  # deferred: 20 ms to import
+    from sweeps.analysis.robustness import drawn  # deferred: the pipeline's import
+
+    with_users = [d for d in lines if d.get("users") and all(m in d["modes"] for m in modes)]
+    if not with_users or "baseline" not in modes or len(modes) < 2:
+        return {}
+    names = list(with_users[0]["users"])
+    shapes = [np.shape(d["modes"][modes[0]]["outcome"]) for d in with_users]
+    N, T = max(n for n, _ in shapes), max(t for _, t in shapes)
+    S, M = len(with_users), len(modes)
+    code = {o: i for i, o in enumerate(OUTCOMES)}
+    outcome = np.full((S, M, N, T), -1, np.int8)
+    user = np.zeros((S, M, N, T, len(POPULATED)), float)
+    mask = np.zeros((S, T), bool)
+    for s, (d, (n, t)) in enumerate(zip(with_users, shapes, strict=True)):
+        mask[s, :t] = True
+        for m, mode in enumerate(modes):
+            outcome[s, m, :n, :t] = [[code[o] for o in row] for row in d["modes"][mode]["outcome"]]
+        for name in names:
+            if name in POPULATED:
+                user[s, :, :n, :t, POPULATED.index(name)] = np.asarray(d["users"][name], float)
+    return drawn(outcome, user, mask, modes, n_boot)
+
+
 def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     import pandas as pd  # deferred: 1.0 s to import
 
+    from geometry_precompute.schema import ASSISTANCE  # deferred: 20 ms to import
     from sweeps.analysis.compare import json_rows, read_evaluate_json  # deferred: 8 ms to import
 
     lines = read_evaluate_json(path)
@@ -258,6 +373,28 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
                     + [_fmt(d["modes"].get(m, {}).get(k)) for m in modes
                        for k in ("success_rate", "delta_R_mean")] for d in lines],
                    left=1, cls="modes")]
+    per_scene = [[d["scene"], m, _fmt(e.get("time_to_activation_mean"), 2),
+                  _fmt(e.get("path_length_mean"))]
+                 + [_fmt((e.get("assistance") or {}).get(k)) for k in ASSISTANCE]
+                 for d in lines for m, e in d["modes"].items()]
+    if len(lines) > 1:  # each measure's mean over the scenes, with its interval
+        for m in modes:
+            es = [d["modes"][m] for d in lines if m in d["modes"]]
+            values = [[e.get("time_to_activation_mean") for e in es],
+                      [e.get("path_length_mean") for e in es]] + \
+                     [[(e.get("assistance") or {}).get(k) for e in es] for k in ASSISTANCE]
+            per_scene.append(["all scenes", m] + [
+                _ci(mean_ci(np.array(v, dtype=float), n_boot), 2 if i == 0 else 3)
+                for i, v in enumerate(values)])
+    body += ["<h2>How long, and how assisted</h2>",
+             f'<p class="note">Per scene and mode: {HOW_LONG_NOTE}; over all scenes, '
+             "the mean over scenes [95 % CI].</p>",
+             _table(["scene", "mode", "time (s)", "path (m)"]
+                    + [f"assisted: {k}" for k in ASSISTANCE], per_scene, left=2, cls="time")]
+    drawn_section = _drawn_json(lines, modes, n_boot)
+    if drawn_section:
+        body += ["<h2>Success against the drawn users</h2>", f'<p class="note">{DRAWN_NOTE}</p>']
+        body += [_drawn_table(entry, modes) for entry in drawn_section.values()]
     if task_rows:
         body += ["<h2>Per task</h2>", _table(
             ["scene", "task", "template", "object"] + [f"{m} success" for m in modes],

@@ -1,5 +1,8 @@
-"""The reproduction's robustness section: the paper's experiment again with imperfect
-simulated users (reference/model, "Simulated users").
+"""Robustness to imperfect simulated users (reference/model, "Simulated users"), two
+ways: the reproduction's section (:func:`run`, the paper's experiment again at fixed
+levels of each user parameter) and, for any run whose users are drawn from a population
+(``evaluate``, ``report`` of a sweep), success against each drawn parameter
+(:func:`drawn`, binned).
 
 For each user parameter, at several levels, the same scenes are evaluated in every mode
 (the optimized mode keeps the spaces its search found for the perfect user: the
@@ -24,20 +27,34 @@ from shacc_jax.types import Search
 from sweeps.analysis.stats import format_ci, mean_ci, paired_diff_ci
 from sweeps.pipeline import evaluate_results
 
-# The levels each parameter is evaluated at (besides the perfect user, level 0).
+# The levels each parameter is evaluated at (besides the perfect user, level 0), and
+# what else that parameter's levels set (the wandering hand's correlation time needs a
+# hand that wanders: user_noise at 0.3 rad).
 LEVELS: dict[str, list[Any]] = {
     "user_noise": [0.1, 0.2, 0.4],
-    "user_lag": [0.25, 0.5],
+    "user_noise_tau": [0.2, 0.5, 1.0],
     "user_tremor": [0.005, 0.01, 0.02],
+    "user_input": ["modes"],
+    "user_switch": [0.25, 0.5, 1.0],
     "user_aim": ["object"],
 }
 QUICK_LEVELS: dict[str, list[Any]] = {
-    "user_noise": [0.3], "user_lag": [0.5], "user_tremor": [0.01], "user_aim": ["object"]}
-PERFECT: dict[str, Any] = {"user_noise": 0.0, "user_lag": 0.0, "user_tremor": 0.0,
-                           "user_aim": "space"}
-WHAT = {"user_noise": "direction noise (rad)", "user_lag": "lag (probability a step)",
+    "user_noise_tau": [0.5], "user_tremor": [0.01],
+    "user_input": ["modes"], "user_switch": [1.0], "user_aim": ["object"]}
+WITH: dict[str, dict[str, Any]] = {"user_noise_tau": {"user_noise": 0.3}}
+PERFECT: dict[str, Any] = {"user_noise": 0.0, "user_noise_tau": 0.0, "user_tremor": 0.0,
+                           "user_input": "3d", "user_switch": 0.0, "user_aim": "space",
+                           "user_switch_at": 0.5, "user_mode_switch_s": 0.5,
+                           "user_tremor_hz": 5.0}
+WHAT = {"user_noise": "direction noise (rad)",
+        "user_noise_tau": "a wandering hand's correlation time (s, at 0.3 rad)",
         "user_tremor": "tremor amplitude (m, at 5 Hz)",
-        "user_aim": "aim (at the task's space or at the object)"}
+        "user_input": "the input device (a 3-D command or a two-mode joystick)",
+        "user_switch": "a change of mind's probability (turning half-way)",
+        "user_aim": "aim (at the task's space or at the object)",
+        "user_switch_at": "where a change of mind turns (of the way to the first task)",
+        "user_mode_switch_s": "a joystick's time to switch mode (s)",
+        "user_tremor_hz": "tremor frequency (Hz)"}
 # The advantage "holds" where, at every level, its CI lies above zero and its mean is at
 # least this share of the perfect user's.
 HOLDS_SHARE = 0.75
@@ -87,6 +104,7 @@ def sentence(param: str, rows: list[dict]) -> str:
     """One sentence: what happens to ShaCC's and the optimized mode's advantage over the
     baseline from the perfect user to the parameter's last level."""
     last = rows[-1]
+    reference = (f"at {rows[0]['level']}" if param in WITH else "for the perfect user")
     parts = []
     for mode, name in (("shacc", "ShaCC's"), ("optimized", "the optimized mode's")):
         if mode not in last["vs_baseline"]:
@@ -94,9 +112,8 @@ def sentence(param: str, rows: list[dict]) -> str:
         v = verdict(rows, mode)
         said = {"none": "is not there to begin with", "holds": "holds",
                 "shrinks": "shrinks", "reverses": "reverses"}[v]
-        parts.append(f"{name} advantage {said} ({_pp(rows[0]['vs_baseline'][mode])} for "
-                     f"the perfect user, {_pp(last['vs_baseline'][mode])} at "
-                     f"{last['level']})")
+        parts.append(f"{name} advantage {said} ({_pp(rows[0]['vs_baseline'][mode])} "
+                     f"{reference}, {_pp(last['vs_baseline'][mode])} at {last['level']})")
     return f"{_upper(WHAT[param])}: " + "; ".join(parts) + "."
 
 
@@ -105,17 +122,22 @@ def run(results: list[PrecomputeResult], found: Search, modes: Sequence[str],
         quick: bool = False, progress=None) -> dict:
     """The robustness section: per parameter {"rows": [...], "verdict": {mode: ...},
     "sentence": ...}; rows[0] is the perfect user (``perfect_u``, ``perfect_delta_r``:
-    the main evaluation's per-scene metrics (S, M))."""
+    the main evaluation's per-scene metrics (S, M)), or for a parameter in WITH that
+    parameter's perfect value beside the WITH settings."""
     levels = QUICK_LEVELS if quick else LEVELS
     max_tasks = max(len(r.spaces) for r in results)
     out: dict[str, Any] = {}
     for param, values in levels.items():
-        rows = [level_row(PERFECT[param], perfect_u, perfect_delta_r, modes, n_boot, seed)]
-        for value in values:
+        # A parameter that only means something beside another (WITH) starts from that
+        # other alone, so that its first row is what its levels are compared with.
+        first = [] if param in WITH else [
+            level_row(PERFECT[param], perfect_u, perfect_delta_r, modes, n_boot, seed)]
+        rows = first
+        for value in ([PERFECT[param]] if param in WITH else []) + list(values):
             if progress is not None:
                 progress(f"  {param} = {value}")
-            user = [replace(r, settings=r.settings.with_overrides({param: value}))
-                    for r in results]
+            user = [replace(r, settings=r.settings.with_overrides(
+                {**WITH.get(param, {}), param: value})) for r in results]
             me = evaluate_results(user, modes, max_tasks=max_tasks,
                                   found=found).evaluation.metrics
             rows.append(level_row(value, np.asarray(me.u_scene), np.asarray(me.delta_R_mean),
@@ -148,3 +170,71 @@ def markdown(section: dict, modes: Sequence[str]) -> str:
 
 def _upper(text: str) -> str:
     return text[:1].upper() + text[1:]
+
+
+def drawn(outcome: np.ndarray, user: np.ndarray, task_mask: np.ndarray,
+          modes: Sequence[str], n_boot: int = 2000, seed: int = 0, bins: int = 4) -> dict:
+    """Success against each drawn user parameter of a run with a population of users:
+    per parameter that varies, the rollouts binned by its drawn value (``bins`` bins
+    between quantiles); per bin and mode the mean over scenes of each scene's success
+    among its rollouts in the bin, and each mode's paired difference to the baseline,
+    scene by scene (scenes without a rollout in the bin left out), with scene-level
+    CIs; and the sentence :func:`sentence` says of the lowest bin against the highest.
+
+    :param outcome: (S, M, N, T) outcome codes; ``user``: (S, M, N, T, U) the drawn
+        values (the same in every mode), U = len(POPULATED); ``task_mask``: (S, T).
+    :returns: {parameter: {"rows": [...], "verdict": {...}, "sentence": ...}}, rows as
+        :func:`level_row`'s with the bin "[low, high]" as the level.
+    """
+    from geometry_precompute.population import POPULATED
+    from geometry_precompute.schema import SUCCESS
+
+    outcome = np.asarray(outcome)
+    values = np.asarray(user, float)[:, 0]  # (S, N, T, U): one user in every mode
+    real = np.broadcast_to(np.asarray(task_mask, bool)[:, None, :], values.shape[:3])
+    out: dict[str, Any] = {}
+    for i, name in enumerate(POPULATED):
+        v = values[..., i]
+        spread = v[real]
+        if spread.size == 0 or np.ptp(spread) <= 0:
+            continue  # not drawn (or drawn to one value)
+        edges = np.unique(np.quantile(spread, np.linspace(0, 1, bins + 1)))
+        if edges.size < 2:
+            continue
+        rows = []
+        for b in range(edges.size - 1):
+            lo, hi = edges[b], edges[b + 1]
+            inside = real & (v >= lo) & ((v < hi) if b < edges.size - 2 else (v <= hi))
+            n = inside.sum(axis=(1, 2))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                u = np.stack([np.where(n > 0, ((outcome[:, m] == SUCCESS) & inside)
+                                       .sum(axis=(1, 2)) / np.maximum(n, 1), np.nan)
+                              for m in range(len(modes))], axis=1)
+            row = level_row(f"[{lo:.3g}, {hi:.3g}]", u, np.full_like(u, np.nan), modes,
+                            n_boot, seed)
+            rows.append(row)
+        entry = {"rows": rows,
+                 "verdict": {m: verdict(rows, m) for m in modes if m != "baseline"},
+                 "sentence": drawn_sentence(name, rows)}
+        out[name] = entry
+    return out
+
+
+def drawn_sentence(param: str, rows: list[dict]) -> str:
+    """One sentence: ShaCC's (and the optimized mode's) advantage over the baseline,
+    from the lowest bin of a drawn parameter to the highest; a verdict only where there
+    are scenes enough for CIs."""
+    first, last = rows[0], rows[-1]
+    parts = []
+    for mode, name in (("shacc", "ShaCC's"), ("optimized", "the optimized mode's")):
+        if mode not in last["vs_baseline"]:
+            continue
+        with_ci = all(r["vs_baseline"][mode]["ci"] is not None for r in rows)
+        said = {"none": "is not there in the lowest bin", "holds": "holds",
+                "shrinks": "shrinks", "reverses": "reverses"}[verdict(rows, mode)] \
+            if with_ci else "goes"
+        parts.append(f"{name} advantage {said} ({_pp(first['vs_baseline'][mode])} at "
+                     f"{first['level']}, {_pp(last['vs_baseline'][mode])} at {last['level']})")
+    if not parts:
+        return f"{_upper(WHAT.get(param, param))}, as drawn: no mode to hold against the baseline."
+    return f"{_upper(WHAT.get(param, param))}, as drawn: " + "; ".join(parts) + "."

@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from geometry_precompute.population import POPULATED, text_of
-from geometry_precompute.schema import OUTCOMES
+from geometry_precompute.schema import ASSISTANCE, OUTCOMES
 from geometry_precompute.settings import SPECS
 
 PART = "part-{:06d}.parquet"
@@ -58,6 +58,13 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "MODE.delta_R_mean": ("float64", "rad",
                               "mean orientation jump over successes; null without one"),
         "MODE.n_OUTCOME": ("int64", "", "rollouts that ended with OUTCOME"),
+        "MODE.time_mean": ("float64", "s", "mean time to activation over successes; null "
+                           "without one"),
+        "MODE.path_length_mean": ("float64", "m", "mean path length over successes; null "
+                                  "without one"),
+        "MODE.assist_KIND": ("float64", "", "the fraction of all the rollouts' steps spent "
+                             "under assistance KIND (none, scene, correct, wrong); null "
+                             "where no rollout took a step"),
     },
     "tasks": {
         "point": ("int32", "", "sweep point"),
@@ -96,11 +103,18 @@ COLUMNS: dict[str, dict[str, tuple[str, str, str]]] = {
         "activated": ("int16", "", "the task that activated (-1: none)"),
         "steps": ("int32", "", "step of activation (max_steps on timeout)"),
         "delta_R": ("float32", "rad", "orientation jump at activation; null unless success"),
-        "user_noise": ("float32", "rad", "the user's direction noise this rollout drew; "
-                       "these four columns only in a sweep with a population of users"),
-        "user_lag": ("float32", "", "its lag probability"),
+        "time": ("float32", "s", "time to activation, steps x dt (to the end where none)"),
+        "path_length": ("float32", "m", "length of the commanded path until the end"),
+        "assist_KIND": ("int32", "", "steps taken under assistance KIND (none, scene, "
+                        "correct, wrong; they sum to steps)"),
+        "user_noise": ("float32", "rad", "the user's noise this rollout drew; these seven "
+                       "columns only in a sweep with a population of users"),
+        "user_noise_tau": ("float32", "s", "its wandering hand's correlation time"),
         "user_tremor": ("float32", "m", "its tremor amplitude"),
         "user_tremor_hz": ("float32", "Hz", "its tremor frequency"),
+        "user_switch": ("float32", "", "its probability of a change of mind"),
+        "user_switch_at": ("float32", "", "where in the approach to the first task it turns"),
+        "user_mode_switch_s": ("float32", "s", "its joystick's time to switch mode"),
     },
 }
 
@@ -213,6 +227,12 @@ def scenes_table(point_index: int, point: dict, setting_names, modes, scene_indi
         for o, outcome in enumerate(OUTCOMES):
             cols[f"{mode}.n_{outcome}"] = numbers_array(
                 np.asarray(metrics.outcome_counts[:S, m, o], np.int64))
+        for name in ("time_mean", "path_length_mean"):
+            v = np.asarray(getattr(metrics, name)[:S, m], np.float64)
+            cols[f"{mode}.{name}"] = numbers_array(v, valid=np.isfinite(v))
+        for k, kind in enumerate(ASSISTANCE):
+            v = np.ascontiguousarray(metrics.assist_fraction[:S, m, k], np.float64)
+            cols[f"{mode}.assist_{kind}"] = numbers_array(v, valid=np.isfinite(v))
     return pa.table(cols)
 
 
@@ -271,11 +291,12 @@ def starts_table(point_index: int, scene_indices, starts: np.ndarray) -> pa.Tabl
     return pa.table(cols)
 
 
-def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table:
+def rollouts_table(point_index: int, modes, scene_indices, rollouts, dt) -> pa.Table:
     """One row per rollout of one sweep point (padding left out), in the order scene,
     mode, start, task: scene, mode, start, intended task, outcome, activated task (-1:
-    none), steps and delta_R; where ``rollouts`` has a ``user`` array (S, M, N, T, 4),
-    the user settings each rollout drew."""
+    none), steps, delta_R, the time (steps x the scene's ``dt``), the path length and
+    the steps under each kind of assistance; where ``rollouts`` has a ``user`` array (S,
+    M, N, T, U), the user settings each rollout drew."""
     S = len(scene_indices)
     outcome = np.asarray(rollouts.outcome)[:S]
     shape = outcome.shape
@@ -298,7 +319,14 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts) -> pa.Table
         "activated": numbers_array(flat(rollouts.activated, np.int16)),
         "steps": numbers_array(flat(rollouts.step, np.int32)),
         "delta_R": numbers_array(dr := flat(rollouts.delta_R, np.float32), valid=np.isfinite(dr)),
+        "time": numbers_array(flat(np.asarray(rollouts.step, np.float64)
+                                   * np.asarray(dt, np.float64)[:S, None, None, None],
+                                   np.float32)),
+        "path_length": numbers_array(flat(rollouts.path_length, np.float32)),
     }
+    for i, kind in enumerate(ASSISTANCE):
+        cols[f"assist_{kind}"] = numbers_array(flat(np.asarray(rollouts.assist)[..., i],
+                                                    np.int32))
     user = getattr(rollouts, "user", None)
     if user is not None:
 

@@ -12,11 +12,15 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 import shacc_jax
 from geometry_precompute import InputError
 from geometry_precompute.baking import bake
 from geometry_precompute.loading import scene_files as folder_scene_files
-from shacc_jax.types import OUTCOMES
+from geometry_precompute.settings import describe_user
+from shacc_jax.types import ASSISTANCE, OUTCOMES
+from sweeps.analysis.robustness import drawn
 from sweeps.app.inputs import load_and_precompute
 from sweeps.output import announce, check_output_file, clean_json, human_output, write_output
 from sweeps.pipeline import evaluate_results, scene_json, tasks_json
@@ -57,8 +61,10 @@ def print_summary(ev, s: int = 0) -> None:
     print("clusters: " + ("none" if not meta else
                           "  ".join("[" + ", ".join(ids[i] for i in c) + "]" for c in meta)))
     n_starts = ev.baked.n_starts
+    print(f"user: {describe_user(r.settings)}")
     print(f"rollouts per mode: {int(me.n_rollouts[s, 0])} ({n_starts} starts x {len(ids)} tasks)")
     print_table(ev, [s], with_scene=False)
+    print_how_long(ev, [s], with_scene=False)
 
 
 def print_table(ev, scenes: list[int], with_scene: bool = True) -> None:
@@ -78,6 +84,54 @@ def print_table(ev, scenes: list[int], with_scene: bool = True) -> None:
             dr_txt = "n/a" if dr != dr else f"{dr:.3f}"
             lead = f"{name:<{w}} " if with_scene else ""
             print(f"{lead}{mode:<10} {me.u_scene[s, m]:>8.3f} {counts} {dr_txt:>14}")
+
+
+def print_how_long(ev, scenes: list[int], with_scene: bool = True) -> None:
+    """A row per (scene, mode): the mean time to activation and path length of the
+    successes, and the fractions of the steps under each kind of assistance."""
+    me = ev.evaluation.metrics
+    w = max([5] + [len(ev.results[s].scene.name) for s in scenes]) if with_scene else 0
+    head = (f"{'scene':<{w}} " if with_scene else "") + f"{'mode':<10} {'time (s)':>9} " \
+        f"{'path (m)':>9}  assisted: " + " ".join(f"{k:>7}" for k in ASSISTANCE)
+    print()
+    print(head)
+    print("-" * len(head))
+
+    def f(v, fmt):
+        return "n/a" if v != v else format(v, fmt)
+
+    for s in scenes:
+        lead = f"{ev.results[s].scene.name:<{w}} " if with_scene else ""
+        for m, mode in enumerate(ev.modes):
+            parts = " ".join(f"{f(v, '.3f'):>7}" for v in me.assist_fraction[s, m])
+            print(f"{lead}{mode:<10} {f(me.time_mean[s, m], '.2f'):>9} "
+                  f"{f(me.path_length_mean[s, m], '.3f'):>9}            {parts}")
+    if len(scenes) > 1:
+        from sweeps.analysis.stats import format_ci, mean_ci  # deferred: scipy, 0.3 s
+
+        print(f"mean over the {len(scenes)} scenes [95 % CI]:")
+        for m, mode in enumerate(ev.modes):
+            def ci(a, digits):
+                return format_ci(mean_ci(np.asarray(a)[scenes], 2000), digits)
+            share = ", ".join(f"{k} {ci(me.assist_fraction[:, m, i], 3)}"
+                              for i, k in enumerate(ASSISTANCE))
+            print(f"  {mode}: time {ci(me.time_mean[:, m], 2)} s, path "
+                  f"{ci(me.path_length_mean[:, m], 3)} m; assisted: {share}")
+
+
+def print_drawn(ev) -> None:
+    """With a population of users and a baseline to hold against: per drawn parameter,
+    the advantage of ShaCC over the baseline from its lowest to its highest quartile."""
+    user = ev.evaluation.rollouts.user
+    if user is None or not user.shape[-1] or "baseline" not in ev.modes:
+        return
+    found = drawn(np.asarray(ev.evaluation.rollouts.outcome), np.asarray(user),
+                  np.asarray(ev.baked.task_mask), list(ev.modes))
+    if found:
+        print("\nsuccess against the drawn users (rollouts binned by quartiles of each value; "
+              "CIs over scenes):")
+        for entry in found.values():
+            print(f"  {entry['sentence']}")
 
 
 def print_tasks(ev, s: int, with_scene: bool = False) -> None:
@@ -133,7 +187,12 @@ def cmd_evaluate(args) -> int:
         else:
             print(f"{len(results)} scenes, {ev.baked.n_starts} starts each, evaluated as "
                   "one batch")
+            users = {describe_user(r.settings) for r in results}
+            print("user: " + (users.pop() if len(users) == 1 else "per scene, as its "
+                              "settings say"))
             print_table(ev, list(range(len(results))))
+            print_how_long(ev, list(range(len(results))))
+        print_drawn(ev)
         if len(results) <= 10:
             for s in range(len(results)):
                 print_tasks(ev, s, with_scene=len(results) > 1)

@@ -66,7 +66,8 @@ class ChunkResult:
 
 # The rollout fields the tables hold, and the dtypes they travel in; only these are copied
 # from the accelerator (17 of a 1 000-scene chunk's 57 MB).
-COMPACT = {"outcome": "int8", "activated": "int16", "step": "int32", "delta_R": "float32"}
+COMPACT = {"outcome": "int8", "activated": "int16", "step": "int32", "delta_R": "float32",
+           "path_length": "float32", "assist": "int32"}
 
 _LOCK = threading.Lock()
 _COUNTS = {"programs": 0, "loaded": 0}
@@ -308,7 +309,8 @@ def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
             ro["user"] = _drawn(ev.rollouts.user[:S], b, S)
     params = [{"q_min": b.q_min[:S], "q_init": b.q_init[:S], "q_shrunk": b.q_shrunk[:S],
                "q_optimized": None if found is None else np.asarray(found.q)[:S],
-               "starts": b.starts[:S]} for b, (_, found) in zip(joined.bakes, evs, strict=True)]
+               "starts": b.starts[:S], "dt": b.dt[:S]}
+              for b, (_, found) in zip(joined.bakes, evs, strict=True)]
     t2 = time.perf_counter()
     programs = _COUNTS["programs"] - before["programs"]
     loaded = _COUNTS["loaded"] - before["loaded"]
@@ -329,8 +331,12 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
     task_mask = np.arange(job.shapes.tasks)[None, :] < n_tasks[:, None]
     for i, p, ro, pa_ in zip(job.chunk.points, job.points, arrays.rollouts, arrays.params,
                              strict=True):
-        u, mean, counts, _ = scene_metrics(ro["outcome"], ro["delta_R"], task_mask[:S])
-        me = SimpleNamespace(u_scene=u, delta_R_mean=mean, outcome_counts=counts)
+        u, mean, counts, _, time_mean, path_mean, fraction = scene_metrics(
+            ro["outcome"], ro["delta_R"], task_mask[:S], ro["step"], ro["path_length"],
+            ro["assist"], pa_["dt"])
+        me = SimpleNamespace(u_scene=u, delta_R_mean=mean, outcome_counts=counts,
+                             time_mean=time_mean, path_length_mean=path_mean,
+                             assist_fraction=fraction)
         parts["scenes"].append(tables.scenes_table(i, p, job.setting_names, job.modes,
                                                    job.chunk.scenes, arrays.labels, me,
                                                    job.populations))
@@ -338,7 +344,7 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
                                                  pa_, ro["outcome"]))
         parts["starts"].append(tables.starts_table(i, job.chunk.scenes, pa_["starts"]))
         parts["rollouts"].append(tables.rollouts_table(i, job.modes, job.chunk.scenes,
-                                                       SimpleNamespace(**ro)))
+                                                       SimpleNamespace(**ro), pa_["dt"]))
     joined = {name: pa.concat_tables(ts) for name, ts in parts.items()}
     encoded = {name: tables.parquet_bytes(t, name, arrays.provenance)
                for name, t in joined.items()}

@@ -25,9 +25,12 @@ import numpy as np
 OUT = Path(__file__).with_name("evaluation_reference.npz")
 RANDOM = 16
 FIELDS = ("outcome", "activated", "step", "meta_steps", "point", "path_length", "delta_R",
-          "orientation")
-# A user with every imperfection the stepped users have (the stepped kernel).
-IMPERFECT = {"user_noise": 0.2, "user_tremor": 0.01}
+          "orientation", "assist")
+# A user with the stepped users' imperfections (the stepped kernel): a wandering hand,
+# a tremor and a change of mind in three approaches of ten; the joystick is held to the
+# NumPy Automaton in test_user_models.
+IMPERFECT = {"user_noise": 0.2, "user_noise_tau": 0.5, "user_tremor": 0.01,
+             "user_switch": 0.3}
 
 
 def batches():
@@ -88,7 +91,7 @@ def evaluate_all() -> dict[str, np.ndarray]:
 # What the reference promises across processors and JAX versions (docs/reference/
 # outputs.md, "Reproducibility"): these fields exactly, NaN where the recording has NaN,
 # and every other number within its absolute tolerance (orientations up to sign).
-EXACT = ("outcome", "activated", "step", "meta_steps", "u_scene")
+EXACT = ("outcome", "activated", "step", "meta_steps", "assist", "u_scene")
 TOLERANCE = {"point": 1e-6, "path_length": 1e-6, "orientation": 1e-5, "delta_R": 1e-5,
              "delta_R_mean": 1e-5}
 
