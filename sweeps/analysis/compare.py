@@ -2,13 +2,29 @@
 
 A and B are two ``evaluate --json`` outputs (JSON Lines, one scene per line) or two
 sweep folders, of the same scenes (and, for sweeps, the same points). For every mode
-(per sweep point for sweeps) and every metric (success, delta_R_mean) it reports the
+(per sweep point for sweeps) and every metric (METRICS: success, delta_R_mean, the mean
+time to activation and path length of the successes, and the shares of the steps under
+each assistance; outputs written before a metric existed leave it empty) it reports the
 mean over scenes of A and of B and their paired difference B - A with a 95 % bootstrap
-CI over scenes (``sweeps.analysis.stats.paired_diff_ci``); per task, the tasks whose success
-changed most. ``--fail-if METRIC:MARGIN`` (``success:-0.02``, ``shacc.success:-0.05``,
-``delta_R_mean:+0.1``) makes the command exit with status 3 when the difference is past
-the margin with confidence: the whole interval below a negative margin, or above a
-positive one. That is the check a CI job runs after changing a template.
+CI over scenes (``sweeps.analysis.stats.paired_diff_ci``); per task, the tasks whose
+success changed most; per gated metric, the scenes that moved most against it.
+
+The gate, for CI (:func:`gate`):
+
+- ``--fail-if METRIC:MARGIN`` is a non-inferiority test. A negative margin
+  (``shacc.success:-0.02``) says "B may be worse than A by at most 0.02": the gate
+  passes only when the interval's lower bound lies above -0.02, i.e. B is shown to be
+  no worse than the margin. A positive margin (``delta_R_mean:+0.1``, a metric where
+  less is better) passes only when the upper bound lies below it. An interval that
+  reaches past the margin fails: the data do not show the change harmless.
+- ``--fail-if-shown METRIC:MARGIN`` is the lenient reading: it fails only when the
+  whole interval lies past the margin, i.e. the harm is shown. With few scenes the
+  interval is wide and such a gate lets most regressions through.
+
+Each rule gives a verdict per matching mode and point: PASS or FAIL, the estimate, the
+interval, the margin, the number of scenes, and where the interval is too wide to
+decide, about how many scenes would narrow it enough (the interval's half-width falls
+as one over the square root of the scenes).
 """
 
 from __future__ import annotations
@@ -20,10 +36,16 @@ import numpy as np
 
 from geometry_precompute import InputError
 from geometry_precompute.fileio import read_bytes_limited
+from geometry_precompute.schema import ASSISTANCE as ASSIST
 from sweeps.analysis.stats import paired_diff_ci
 
-METRICS = ("success", "delta_R_mean")
-REGRESSION = 3  # the exit status of a --fail-if that is met
+METRICS = ("success", "delta_R_mean", "time_mean", "path_length_mean",
+           *(f"assist_{k}" for k in ASSIST))
+# the key of each metric in an ``evaluate --json`` mode object
+JSON_KEYS = {"success": "success_rate", "delta_R_mean": "delta_R_mean",
+             "time_mean": "time_to_activation_mean", "path_length_mean": "path_length_mean"}
+REGRESSION = 3  # the exit status of a gate that fails
+WORST = 5  # scenes listed per gated row, the most moved against the rule first
 
 
 def read_evaluate_json(path: Path) -> list[dict]:
@@ -54,9 +76,10 @@ def json_rows(objects: list[dict]) -> tuple[list[dict], list[dict]]:
     for d in objects:
         name = d["scene"]
         for mode, m in d["modes"].items():
+            shares = m.get("assistance") or {}
             scenes.append({"key": name, "point": 0, "mode": mode,
-                           "success": m.get("success_rate"),
-                           "delta_R_mean": m.get("delta_R_mean")})
+                           **{k: m.get(j) for k, j in JSON_KEYS.items()},
+                           **{f"assist_{k}": shares.get(k) for k in ASSIST}})
         for t in d.get("tasks_detail", []):
             for mode, m in t["modes"].items():
                 tasks.append({"key": name, "point": 0, "task": t["id"], "mode": mode,
@@ -83,8 +106,7 @@ def _load_sweep(path: Path) -> tuple[list[dict], list[dict]]:
     for r in frame.to_dict("records"):
         for mode in modes:
             scenes.append({"key": (r["scene_index"], r["scene"]), "point": int(r["point"]),
-                           "mode": mode, "success": r[f"{mode}.success"],
-                           "delta_R_mean": r[f"{mode}.delta_R_mean"]})
+                           "mode": mode, **{k: r.get(f"{mode}.{k}") for k in METRICS}})
     tasks = []
     if (path / "tasks").is_dir():
         t = pd.read_parquet(path / "tasks")
@@ -134,10 +156,15 @@ def compare(a: str | Path, b: str | Path, n_boot: int = 10_000, seed: int = 0) -
             vb = np.array([np.nan if ib[(point, mode, k)][metric] is None
                            else ib[(point, mode, k)][metric] for k in keys], float)
             d = paired_diff_ci(va, vb, n_boot, seed)
+            per_scene = [{"scene": str(k[-1] if isinstance(k, tuple) else k),
+                          "a": float(x), "b": float(y), "diff": float(y - x)}
+                         for k, x, y in zip(keys, va, vb, strict=True)
+                         if np.isfinite(x) and np.isfinite(y)]
             rows.append({"point": point, "mode": mode, "metric": metric,
                          "a": None if np.all(np.isnan(va)) else float(np.nanmean(va)),
                          "b": None if np.all(np.isnan(vb)) else float(np.nanmean(vb)),
-                         "diff": d["mean"], "ci": d["ci"], "n_scenes": d["n"]})
+                         "diff": d["mean"], "ci": d["ci"], "n_scenes": d["n"],
+                         "scenes": per_scene})
     tasks = []
     ja, jb = _index(ta, ("point", "mode", "key", "task")), _index(tb, ("point", "mode", "key",
                                                                         "task"))
@@ -150,30 +177,89 @@ def compare(a: str | Path, b: str | Path, n_boot: int = 10_000, seed: int = 0) -
     return {"a": str(a), "b": str(b), "rows": rows, "tasks_changed": tasks}
 
 
-def parse_fail_if(text: str) -> tuple[str | None, str, float]:
+def parse_fail_if(text: str, option: str = "--fail-if") -> tuple[str | None, str, float]:
     """``[MODE.]METRIC:MARGIN`` as (mode or None for every mode, metric, margin)."""
     try:
         name, margin = text.rsplit(":", 1)
         value = float(margin)
     except ValueError:
-        raise InputError("<arguments>", "--fail-if", f"must be [MODE.]METRIC:MARGIN such as "
+        raise InputError("<arguments>", option, f"must be [MODE.]METRIC:MARGIN such as "
                          f"success:-0.02, got {text!r}") from None
     mode, _, metric = name.rpartition(".")
     if metric not in METRICS or not np.isfinite(value) or value == 0:
-        raise InputError("<arguments>", "--fail-if", f"METRIC must be one of "
+        raise InputError("<arguments>", option, f"METRIC must be one of "
                          f"{', '.join(METRICS)} and MARGIN a non-zero number, got {text!r}")
     return mode or None, metric, value
 
 
-def failures(result: dict, rules: list[tuple[str | None, str, float]]) -> list[str]:
-    """The rows past a --fail-if margin with confidence (module docstring)."""
-    out = []
-    for mode, metric, margin in rules:
-        for r in result["rows"]:
-            if r["metric"] != metric or (mode and r["mode"] != mode) or not r["ci"]:
-                continue
-            lo, hi = r["ci"]
-            if (margin < 0 and hi < margin) or (margin > 0 and lo > margin):
-                out.append(f"point {r['point']} {r['mode']} {metric}: B - A = {r['diff']:+.4f} "
-                           f"[{lo:+.4f}, {hi:+.4f}], past {margin:+g}")
+def _scenes_needed(n: int, diff: float, ci: list[float], margin: float) -> int | None:
+    """About how many scenes would put the interval on the estimate's side of the
+    margin (its half-width shrinking as 1 / sqrt(n)); None where the estimate itself is
+    past the margin, so that more scenes would not pass it."""
+    half = (ci[1] - ci[0]) / 2
+    room = (diff - margin) if margin < 0 else (margin - diff)
+    if room <= 0:
+        return None
+    return int(np.ceil(n * (half / room) ** 2))
+
+
+def verdict(row: dict, mode_rule: str | None, metric: str, margin: float,
+            shown: bool) -> dict:
+    """One rule's verdict on one row of :func:`compare` (module docstring)."""
+    lo_hi = row["ci"]
+    out = {"rule": f"{(mode_rule + '.') if mode_rule else ''}{metric}:{margin:+g}",
+           "reading": "shown" if shown else "non-inferiority", "point": row["point"],
+           "mode": row["mode"], "metric": metric, "diff": row["diff"], "ci": lo_hi,
+           "margin": margin, "n_scenes": row["n_scenes"], "needed": None}
+    if row["diff"] is None or not lo_hi:
+        out["passed"] = shown  # nothing shown; nothing shown harmless either
+        out["why"] = f"no interval ({row['n_scenes']} scene(s) with a value; at least 2 needed)"
+        return out
+    lo, hi = lo_hi
+    worse = lo if margin < 0 else hi  # the interval's end on the harmful side
+    better = hi if margin < 0 else lo
+    past = (lambda v: v < margin) if margin < 0 else (lambda v: v > margin)
+    if shown:
+        out["passed"] = not past(better)
+        out["why"] = ("the whole interval lies past the margin" if not out["passed"] else
+                      "the interval reaches the margin's good side: harm not shown")
+    else:
+        out["passed"] = not past(worse) and worse != margin
+        out["why"] = ("the interval lies on the good side of the margin: no worse than it"
+                      if out["passed"] else
+                      "the interval reaches past the margin: not shown no worse than it")
+    if not shown and not out["passed"]:
+        out["needed"] = _scenes_needed(row["n_scenes"], row["diff"], lo_hi, margin)
     return out
+
+
+def gate(result: dict, rules: list[tuple[str | None, str, float]],
+         shown_rules: list[tuple[str | None, str, float]] | None = None) -> list[dict]:
+    """Every verdict of the rules (``--fail-if``: non-inferiority) and ``shown_rules``
+    (``--fail-if-shown``) on the rows of :func:`compare`, with each row's scenes that
+    moved most against its rule."""
+    out = []
+    for shown, group in ((False, rules), (True, shown_rules or [])):
+        for mode, metric, margin in group:
+            for r in result["rows"]:
+                if r["metric"] != metric or (mode and r["mode"] != mode):
+                    continue
+                v = verdict(r, mode, metric, margin, shown)
+                sign = 1 if margin < 0 else -1  # harm is a drop (or a rise for +)
+                v["worst_scenes"] = sorted(r["scenes"], key=lambda x: sign * x["diff"])[:WORST]
+                out.append(v)
+    return out
+
+
+def verdict_line(v: dict) -> str:
+    """``PASS`` or ``FAIL``, the rule, the estimate, interval, margin and scenes, why, and
+    what would decide."""
+    ci = "no interval" if not v["ci"] else f"[{v['ci'][0]:+.4f}, {v['ci'][1]:+.4f}]"
+    est = "n/a" if v["diff"] is None else f"{v['diff']:+.4f}"
+    line = (f"{'PASS' if v['passed'] else 'FAIL'} {v['rule']} ({v['reading']}) point "
+            f"{v['point']} {v['mode']} {v['metric']}: B - A = {est} {ci}, margin "
+            f"{v['margin']:+g}, {v['n_scenes']} scenes: {v['why']}")
+    if v["ci"] and not v["passed"] and v["reading"] == "non-inferiority":
+        line += ("; the estimate itself is past the margin" if v["needed"] is None else
+                 f"; about {v['needed']} scenes would decide if the estimate held")
+    return line

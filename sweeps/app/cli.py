@@ -194,9 +194,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("a", type=_path, help="evaluate --json file or sweep folder (before)")
     c.add_argument("b", type=_path, help="the same for after")
     c.add_argument("--fail-if", action="append", default=[], metavar="[MODE.]METRIC:MARGIN",
-                   help="exit with status 3 if B - A is below a negative MARGIN (above a "
-                   "positive one) across its whole 95 %% CI, e.g. success:-0.02 or "
-                   "shacc.delta_R_mean:+0.1 (may be repeated)")
+                   help="a non-inferiority gate: exit with status 3 unless B - A's 95 %% CI "
+                   "lies wholly above a negative MARGIN (below a positive one), i.e. B is "
+                   "shown no worse than the margin; e.g. shacc.success:-0.02 or "
+                   "delta_R_mean:+0.1 (may be repeated)")
+    c.add_argument("--fail-if-shown", action="append", default=[],
+                   metavar="[MODE.]METRIC:MARGIN",
+                   help="the lenient gate: exit with status 3 only if the whole CI lies past "
+                   "the margin, i.e. the harm is shown (lets regressions through when "
+                   "scenes are few)")
     c.add_argument("--json", metavar="OUT.json", type=_path, help="write the comparison")
     c.add_argument("--bootstrap", type=_int_in(100, 10**6), default=10_000,
                    help="bootstrap resamples of the intervals")
