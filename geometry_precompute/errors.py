@@ -97,17 +97,36 @@ class SceneWarning(UserWarning):
     each as one ``warning:`` line; the input is used as given."""
 
 
-def unknown_field(allowed) -> str:
+def did_you_mean(name: str, choices) -> str:
+    """``"; did you mean X?"`` for the choice closest to a misspelt ``name``
+    (``difflib``'s ratio of at least 0.6), else ``""``.
+
+    >>> did_you_mean("v_mx", ["v_max", "dt", "seed"])
+    '; did you mean v_max?'
+    >>> did_you_mean("colour", ["v_max", "dt"])
+    ''
+    """
+    import difflib  # here: only on an error
+
+    close = difflib.get_close_matches(str(name), [str(c) for c in choices], n=1)
+    return f"; did you mean {close[0]}?" if close else ""
+
+
+def unknown_field(allowed, name: str | None = None) -> str:
     """The rule of an unknown key: the keys its table allows, by name, or that the
-    table takes none (never an empty list).
+    table takes none (never an empty list); with the key ``name``, the allowed one it
+    most likely meant.
 
     >>> unknown_field({"radius", "height"})
     'unknown field (allowed: height, radius)'
+    >>> unknown_field({"radius", "height"}, "hieght")
+    'unknown field; did you mean height? (allowed: height, radius)'
     >>> unknown_field(set())
     'unknown field (this table takes no fields)'
     """
     names = sorted(allowed)
     if not names:
         return "unknown field (this table takes no fields)"
-    return f"unknown field (allowed: {', '.join(names)})"
+    hint = did_you_mean(name, names) if name is not None else ""
+    return f"unknown field{hint} (allowed: {', '.join(names)})"
 

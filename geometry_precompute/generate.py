@@ -184,7 +184,7 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
         return dict(table)
     for key in table:
         if key not in _GENERATOR_KEYS:
-            raise bad(key, unknown_field(_GENERATOR_KEYS))
+            raise bad(key, unknown_field(_GENERATOR_KEYS, key))
     area = table.get("table", [1.3, 1.3])
     if not isinstance(area, list) or len(area) != 2:
         raise bad("table", f"must be [x, y] extents in m, got {shown(area)}")
@@ -210,7 +210,7 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
         kind = e["kind"]
         for key in e:
             if key not in _ENTRY_KEYS:
-                raise bad(f"{w}.{key}", unknown_field(_ENTRY_KEYS))
+                raise bad(f"{w}.{key}", unknown_field(_ENTRY_KEYS, key))
         allowed = {"mug": {"radius", "height"}, "cup": {"radius", "height"},
                    "box": {"half_extents"}, "mesh": {"folder", "scale"}}[kind]
         for key in ("radius", "height", "half_extents", "folder", "scale"):

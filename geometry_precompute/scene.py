@@ -184,7 +184,7 @@ def _check_keys(table: Any, allowed: set[str], required: set[str], src: str, whe
         raise InputError(src, where or "<top>", "must be a table")
     for key in table:
         if key not in allowed:
-            raise InputError(src, f"{where}{key}", unknown_field(allowed))
+            raise InputError(src, f"{where}{key}", unknown_field(allowed, key))
     for key in sorted(required):
         if key not in table:
             raise InputError(src, f"{where}{key}", "missing required field")

@@ -27,7 +27,7 @@ from types import MappingProxyType
 from typing import Any
 
 from . import population
-from .errors import InputError, SceneWarning, shown
+from .errors import InputError, SceneWarning, did_you_mean, shown
 from .fileio import check_depth
 from .population import POPULATED, Population
 
@@ -453,7 +453,8 @@ WITHDRAWN = {
 
 def _unknown(name: str) -> str:
     """The rule for a name that is no setting."""
-    return WITHDRAWN.get(name, "unknown setting (`shacc settings` lists them)")
+    return WITHDRAWN.get(name, f"unknown setting{did_you_mean(name, SPECS)} (`shacc "
+                               "settings` lists them)")
 
 
 def _warn_once(message: str) -> None:
@@ -503,7 +504,7 @@ def parse_cli_value(name: str, text: str) -> Any:
     if spec is None and name in WITHDRAWN:
         raise InputError("<--set>", name, WITHDRAWN[name])
     if spec is None:
-        raise InputError("<--set>", name, f"unknown setting; known: {', '.join(SPECS)}")
+        raise InputError("<--set>", name, _unknown(name))
     if spec.kind == "choice":
         return text
     if name in POPULATED and text.strip().startswith("{"):

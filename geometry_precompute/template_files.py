@@ -372,7 +372,7 @@ def parse_template(name: str, raw: Any, src: str) -> Template:
         raise r.bad("", "must be a table")
     for key in raw:
         if key not in _TEMPLATE_KEYS:
-            raise r.bad(key, unknown_field(_TEMPLATE_KEYS))
+            raise r.bad(key, unknown_field(_TEMPLATE_KEYS, key))
     for key in ("fits", "shape", "center", "dims", "orientation"):
         if key not in raw:
             raise r.bad(key, "missing required field")
@@ -412,7 +412,7 @@ def parse_template(name: str, raw: Any, src: str) -> Template:
             raise r.bad(w, "must be a table {min, init, unit}")
         for key in p:
             if key not in _PARAM_KEYS:
-                raise r.bad(f"{w}.{key}", unknown_field(_PARAM_KEYS))
+                raise r.bad(f"{w}.{key}", unknown_field(_PARAM_KEYS, key))
         for key in ("min", "init"):
             if key not in p:
                 raise r.bad(f"{w}.{key}", "missing required field")

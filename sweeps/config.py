@@ -191,7 +191,7 @@ def parse_config(data: Mapping, source: str, base_dir: Path) -> SweepConfig:
     src = str(source)
     for key in data:
         if key not in _TOP:
-            raise InputError(src, key, unknown_field(_TOP))
+            raise InputError(src, key, unknown_field(_TOP, key))
     name = data.get("name", Path(src).stem)
     if not isinstance(name, str) or not name:
         raise InputError(src, "name", "must be a non-empty string")

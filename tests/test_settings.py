@@ -128,8 +128,8 @@ def test_unknown_name_inside_a_nested_table_names_the_full_dotted_name(tmp_path)
     p.write_text(SCENE_HEAD + "[settings]\nside_grasp.radius_inti = 0.18\n")
     with pytest.raises(InputError) as e:
         load_scene(p)
-    assert str(e.value) == f"{p}: settings.side_grasp.radius_inti: unknown setting " \
-        "(`shacc settings` lists them)"
+    assert str(e.value) == f"{p}: settings.side_grasp.radius_inti: unknown setting; " \
+        "did you mean side_grasp.radius_init? (`shacc settings` lists them)"
 
 
 def test_both_forms_of_one_name_is_an_error(tmp_path):

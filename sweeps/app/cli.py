@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import warnings
 from collections.abc import Sequence
@@ -53,6 +54,13 @@ class _Parser(argparse.ArgumentParser):
     """Errors in one line, like every other bad input (docs/reference/errors.md)."""
 
     def error(self, message: str):
+        # argparse's "invalid choice: 'X' (choose from ...)", with the likely one.
+        wrong = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if wrong:
+            from geometry_precompute.errors import did_you_mean  # deferred: errors only
+
+            choices = re.findall(r"'([^']*)'", wrong.group(2)) or wrong.group(2).split(", ")
+            message += did_you_mean(wrong.group(1), choices)
         print(f"error: <arguments>: {self.prog}: {message} (see {self.prog} --help)",
               file=sys.stderr)
         sys.exit(2)
