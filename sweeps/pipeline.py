@@ -36,6 +36,47 @@ class Evaluated:
     search: Search | None = None  # the optimized mode's search (NumPy), when asked for
     provenance: dict | None = None  # software, backend, device, command line
 
+    def tables(self, point: int = 0) -> dict:
+        """The four long tables of a sweep's Parquet dataset for these scenes, as pandas
+        DataFrames (``scenes``, ``tasks``, ``starts``, ``rollouts``): the same columns
+        and types, made by the same functions (``sweeps.analysis.tables``), with
+        ``point`` in the point column and the scenes numbered from 0 (an evaluation
+        sweeps no setting, so the scenes table has no ``set.`` columns).
+
+        Example::
+
+            ev = evaluate_results(results)
+            frames = ev.tables()
+            frames["rollouts"].groupby("mode", observed=True)["time"].mean()
+        """
+        from geometry_precompute.batch import scene_labels  # deferred: the mesh libraries
+        from sweeps.analysis import tables  # deferred: pyarrow, 0.2 s
+
+        S = len(self.results)
+        scenes = np.arange(S)
+        ro, me = self.evaluation.rollouts, self.evaluation.metrics
+        labels = scene_labels(self.results)
+        b = self.baked
+        params = {"q_min": b.q_min[:S], "q_init": b.q_init[:S], "q_shrunk": b.q_shrunk[:S],
+                  "q_optimized": None if self.search is None else np.asarray(self.search.q)[:S],
+                  "starts": b.starts[:S], "dt": b.dt[:S]}
+        populated = ro.user is not None and ro.user.shape[-1] > 0
+        made = {"scenes": tables.scenes_table(point, {}, (), self.modes, scenes, labels, me),
+                "tasks": tables.tasks_table(point, self.modes, scenes, labels, params,
+                                            ro.outcome),
+                "starts": tables.starts_table(point, scenes, params["starts"]),
+                "rollouts": tables.rollouts_table(
+                    point, self.modes, scenes, ro if populated else ro._replace(user=None),
+                    params["dt"])}
+        return {name: t.to_pandas() for name, t in made.items()}
+
+    def start_extent(self, s: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The start grid's extent of scene ``s``, ((y_min, y_max), (z_min, z_max)) in m,
+        as :func:`sweeps.analysis.plots.success_fields` takes it."""
+        st = np.asarray(self.baked.starts[s])
+        return ((float(st[:, 1].min()), float(st[:, 1].max())),
+                (float(st[:, 2].min()), float(st[:, 2].max())))
+
     def searched(self) -> Search:
         """The optimized mode's search; a ValueError when the optimized mode was not
         evaluated."""
