@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -60,14 +61,16 @@ class Evaluated:
         params = {"q_min": b.q_min[:S], "q_init": b.q_init[:S], "q_shrunk": b.q_shrunk[:S],
                   "q_optimized": None if self.search is None else np.asarray(self.search.q)[:S],
                   "starts": b.starts[:S], "dt": b.dt[:S]}
-        populated = ro.user is not None and ro.user.shape[-1] > 0
+        # The rollouts' columns, without the drawn users' where nothing was drawn.
+        fields = {k: np.asarray(v) for k, v in ro._asdict().items()}
+        if ro.user is None or ro.user.shape[-1] == 0:
+            del fields["user"]
         made = {"scenes": tables.scenes_table(point, {}, (), self.modes, scenes, labels, me),
                 "tasks": tables.tasks_table(point, self.modes, scenes, labels, params,
-                                            ro.outcome),
-                "starts": tables.starts_table(point, scenes, params["starts"]),
-                "rollouts": tables.rollouts_table(
-                    point, self.modes, scenes, ro if populated else ro._replace(user=None),
-                    params["dt"])}
+                                            np.asarray(ro.outcome)),
+                "starts": tables.starts_table(point, scenes, np.asarray(b.starts[:S])),
+                "rollouts": tables.rollouts_table(point, self.modes, scenes,
+                                                  SimpleNamespace(**fields), params["dt"])}
         return {name: t.to_pandas() for name, t in made.items()}
 
     def start_extent(self, s: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
