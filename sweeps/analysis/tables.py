@@ -329,7 +329,6 @@ def rollouts_table(point_index: int, modes, scene_indices, rollouts, dt) -> pa.T
                                                     np.int32))
     user = getattr(rollouts, "user", None)
     if user is not None:
-
         for i, k in enumerate(POPULATED):
             cols[k] = numbers_array(flat(np.asarray(user)[..., i], np.float32))
     return pa.table(cols)

@@ -282,10 +282,9 @@ def _evaluate(bakes: list, modes, populations: bool = False) -> list[tuple]:
 
 
 def _drawn(user: np.ndarray, b, S: int) -> np.ndarray:
-    """The user settings each rollout drew, (S, M, N, T, 4) float32: the evaluation's
+    """The user settings each rollout drew, (S, M, N, T, len(POPULATED)) float32: the evaluation's
     where its points had a population, else each scene's plain values (a sweep whose
     other points have a population keeps one set of columns)."""
-
     if user.shape[-1] == len(POPULATED):
         return user.astype(np.float32)
     plain = np.stack([np.asarray(getattr(b, k))[:S] for k in POPULATED], -1)
