@@ -18,9 +18,9 @@ from .streams import rollout_key
 from .types import Geometry, Params
 
 
-def population_values(key: Array, x: Params, dtype) -> Float[Array, "4"]:
-    """The values of the populated user settings (``POPULATED``: user_noise, user_noise_tau,
-    user_tremor, user_tremor_hz) of the rollout ``key`` under one scene's settings ``x``:
+def population_values(key: Array, x: Params, dtype) -> Float[Array, " U"]:
+    """The values of the populated user settings (``POPULATED``, seven, in its order) of
+    the rollout ``key`` under one scene's settings ``x``:
     a setting without a population keeps its value; one with draws from a uniform
     number u in [0, 1) of the rollout's stream (``key`` folded with 2, one per
     setting): uniform low + u (high - low); the normal truncated to [low, high] by its
@@ -29,9 +29,9 @@ def population_values(key: Array, x: Params, dtype) -> Float[Array, "4"]:
     >>> import jax.numpy as jnp
     >>> from shacc_jax.types import Params
     >>> x = Params._make(jnp.zeros(()) for _ in Params._fields)._replace(
-    ...     user_noise=jnp.float32(0.3), user_dist=jnp.array([0, 1, 0, 0]),
-    ...     user_dist_args=jnp.array([[0, 0, 0, 0], [0.2, 0.4, 0.2, 0.4]] + [[0] * 4] * 2,
-    ...                              jnp.float32), user_dist_values=jnp.zeros((4, 16)))
+    ...     user_noise=jnp.float32(0.3), user_dist=jnp.array([0, 1, 0, 0, 0, 0, 0]),
+    ...     user_dist_args=jnp.array([[0, 0, 0, 0], [0.2, 0.4, 0.2, 0.4]] + [[0] * 4] * 5,
+    ...                              jnp.float32), user_dist_values=jnp.zeros((7, 16)))
     >>> v = population_values(jax.random.key(0), x, jnp.float32)
     >>> float(v[0]), 0.2 <= float(v[1]) < 0.4
     (0.30000001192092896, True)

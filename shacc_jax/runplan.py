@@ -202,17 +202,11 @@ def _size(n: float) -> str:
     return f"{int(n)} bytes"
 
 
-# What the per-scene metrics read (copied back whenever the plan computes them).
-METRIC_FIELDS = ("outcome", "step", "path_length", "delta_R", "assist")
-
-
-def _fields(fields: Sequence[str] | None, metrics: bool = False) -> tuple[str, ...]:
-    """The Rollouts fields named by ``fields`` (None: all), each checked; with
-    ``metrics``, those the metrics read too."""
+def _fields(fields: Sequence[str] | None) -> tuple[str, ...]:
+    """The Rollouts fields named by ``fields`` (None: all), each checked (the metrics of
+    a field not named are NaN: ``geometry_precompute.outcomes.scene_metrics``)."""
     if fields is None:
         return Rollouts._fields
-    if metrics:
-        fields = (*fields, *METRIC_FIELDS)
     if isinstance(fields, str):
         raise ValueError(f"fields: a sequence of Rollouts field names, not the string "
                          f"{fields!r}")
@@ -301,7 +295,7 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     return RunPlan(layout=replace(layout, n_starts=n_per), n_scenes=S, n_starts=N, n_points=P,
                    pieces=tuple(range(0, N, n_per)), starts_per_piece=n_per,
                    devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
-                   padded_scenes=per_part * len(devices), fields=_fields(fields, metrics),
+                   padded_scenes=per_part * len(devices), fields=_fields(fields),
                    metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
 
 

@@ -153,13 +153,14 @@ def scene_json(ev: Evaluated, s: int) -> dict:
         modes[mode] = {
             "success_rate": float(me.u_scene[s, m]),
             "delta_R_mean": _none_if_nan(float(me.delta_R_mean[s, m])),
+            "outcome": [[OUTCOMES[c] for c in row] for row in code.tolist()],
+            "activated": [[ids[a] if a >= 0 else None for a in row] for row in act.tolist()],
+            "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
+            # Added later, so after the keys above (the object only grows).
             "time_to_activation_mean": _none_if_nan(float(me.time_mean[s, m])),
             "path_length_mean": _none_if_nan(float(me.path_length_mean[s, m])),
             "assistance": {k: _none_if_nan(float(v))
                            for k, v in zip(ASSISTANCE, me.assist_fraction[s, m], strict=True)},
-            "outcome": [[OUTCOMES[c] for c in row] for row in code.tolist()],
-            "activated": [[ids[a] if a >= 0 else None for a in row] for row in act.tolist()],
-            "delta_R": [[_none_if_nan(v) for v in row] for row in dr.tolist()],
             "time_to_activation": (ro.step[s, m, :, :T] * dt).tolist(),
             "path_length": ro.path_length[s, m, :, :T].tolist(),
             "assist_steps": ro.assist[s, m, :, :T].tolist(),

@@ -26,7 +26,7 @@ def components_first(s: shapes.Prepared) -> shapes.Prepared:
 
 
 def meta_weights(opt, in_cluster, p):
-    """SPEC section 8's normalised weights at one point."""
+    """The meta skill's normalised weights (reference/model) at one point."""
     return normalised(inverse_square_weights(shapes.all_sdf(opt, p), in_cluster))
 
 

@@ -1,4 +1,4 @@
-"""A plain NumPy Automaton: SPEC section 9's step rule, written as literally as
+"""A plain NumPy Automaton: the reference's step rule (reference/model), written as literally as
 possible, in float64, with scipy for every rotation. It shares no code with
 ``shacc_jax``; the tests compare the two rollout by rollout.
 
@@ -313,7 +313,7 @@ def first_headed(user: User, target: int, n_tasks: int) -> int:
 
 def rollout(baked, scene: int, mode_name: str, start: int, target: int,
             user: User | None = None, swept: bool = False, mjcf: str | None = None) -> Result:
-    """One rollout from baked arrays (float64), SPEC section 9 step by step; with
+    """One rollout from baked arrays (float64), the step rule step by step; with
     ``user``, the imperfect user of the model page's "Simulated users" (a wandering
     hand, a tremor, a two-mode joystick, a change of mind, aiming at the object) in
     mode ``mode_name`` instead of the perfect one; with

@@ -26,11 +26,13 @@ def tracked() -> list[Path]:
     return [ROOT / p for p in out.stdout.splitlines()]
 
 
-def test_no_file_outside_the_tests_names_a_spec_section():
+def test_no_file_names_a_spec_section():
+    """Nothing in the repository, the tests included, points to a specification it does
+    not hold (this test's own pattern aside)."""
     pattern = re.compile(r"\bSPEC(\.md)?\b(?!S)")
     found = []
     for p in tracked():
-        if p.parts[len(ROOT.parts)] == "tests" or p.suffix in (".png", ".parquet", ".npz"):
+        if p.name == "test_docs.py" or p.suffix in (".png", ".parquet", ".npz"):
             continue
         try:
             text = p.read_text(encoding="utf-8")

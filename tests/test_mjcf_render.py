@@ -1,4 +1,4 @@
-"""MJCF export and the rendered picture (SPEC section 12b, first half of issue 7)."""
+"""MJCF export and the rendered picture (reference/mujoco)."""
 
 from __future__ import annotations
 

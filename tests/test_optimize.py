@@ -1,4 +1,4 @@
-"""The optimized mode (SPEC section 17): spaces built from parameter vectors, the
+"""The optimized mode (reference/model): spaces built from parameter vectors, the
 search against brute force, its bounds and held-out starts, the plain NumPy Automaton
 on the spaces it found, and the command line."""
 

@@ -1,4 +1,4 @@
-"""Scene files: round trip, and one test per rule of SPEC section 13."""
+"""Scene files: round trip, and one test per rule of the scene format (reference/scenes)."""
 
 from __future__ import annotations
 

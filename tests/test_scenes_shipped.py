@@ -1,4 +1,4 @@
-"""The shipped manual scenes (SPEC section 11) and the random generator."""
+"""The shipped manual scenes (reference/scenes) and the random generator."""
 
 from __future__ import annotations
 

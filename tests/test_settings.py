@@ -1,4 +1,4 @@
-"""Settings: one place for defaults, validation, and SPEC section 16's precedence."""
+"""Settings: one place for defaults, validation, and the documented precedence."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ def _value(name):
 
 @pytest.mark.parametrize("name", DOTTED)
 def test_dotted_setting_bare_and_quoted_mean_the_same(tmp_path, name):
-    """SPEC 16: `a.b = v` (a nested TOML table) and `"a.b" = v` name one setting."""
+    """`a.b = v` (a nested TOML table) and `"a.b" = v` name one setting."""
     from geometry_precompute import load_scene
 
     v = _value(name)

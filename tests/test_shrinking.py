@@ -1,4 +1,4 @@
-"""Clusters and Shrinking (SPEC sections 6 and 7): properties over random scenes."""
+"""Clusters and Shrinking (reference/model): properties over random scenes."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def test_sigma_one_sends_every_overlapping_space_to_its_minimum():
 
 
 def _pseudocode(spaces, sigma, max_iter):
-    """SPEC section 7 as written: every pass tests every pair with coal's signed
+    """Shrinking as the reference writes it: every pass tests every pair with coal's signed
     distance (no closed forms, no skipped tests) on NumPy arrays."""
     from geometry_precompute.intersect import INTERSECT_TOL
 

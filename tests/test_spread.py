@@ -1,4 +1,4 @@
-"""d and h (SPEC sections 5 and 10) on hand-computed and degenerate cases."""
+"""d and h (reference/model) on hand-computed and degenerate cases."""
 
 from __future__ import annotations
 

@@ -112,7 +112,9 @@ def test_tables_and_values(finished):
     assert {"point", "scene", "C_init", "C_final", "d", "h", "shacc.success",
             "shacc.delta_R_mean", "baseline.n_wrong"} <= set(scenes.columns)
     assert list(rollouts.columns) == ["point", "scene_index", "mode", "start", "task", "outcome",
-                                      "activated", "steps", "delta_R"]
+                                      "activated", "steps", "delta_R", "time", "path_length",
+                                      "assist_none", "assist_scene", "assist_correct",
+                                      "assist_wrong"]
     assert json.loads((out / "config.json").read_text())["hash"] == cfg.hash()
     # A row against a direct evaluation of the same scene and settings.
     import shacc_jax
@@ -158,9 +160,12 @@ def test_the_dataset_reads_the_same_typed_everywhere(finished):
         described = json.loads(meta[b"shacc.columns"])
         assert described.keys() == COLUMNS[name].keys()
         assert json.loads(meta[b"shacc.provenance"])["backend"] == "cpu"
-        for col in arrow.column_names:  # every column is described (NAME, MODE patterns)
+        for col in arrow.column_names:  # every column is described (NAME, MODE, KIND)
+            rest = col.split(".", 1)[-1]
             pattern = col if col in described else "set.NAME" if col.startswith("set.") else \
-                "MODE." + ("n_OUTCOME" if ".n_" in col else col.split(".", 1)[1])
+                "assist_KIND" if col.startswith("assist_") else \
+                "MODE." + ("n_OUTCOME" if rest.startswith("n_") else "assist_KIND"
+                           if rest.startswith("assist_") else rest)
             assert pattern in described, col
     scenes = ds.dataset(out / "scenes").to_table()
     assert scenes.schema.field("set.v_max").type == pa.float64()
@@ -292,7 +297,7 @@ def _assert_twelve_scenes(out: Path, ref_out: Path) -> None:
 
 
 def test_lost_scheduler_ends_the_sweep_in_one_line_and_the_rerun_goes_on(tmp_path, finished):
-    """SPEC section 12, the scheduler killed: a 12-chunk sweep on a cluster started apart
+    """The scheduler killed: a 12-chunk sweep on a cluster started apart
     loses its scheduler (SIGKILL) after its first chunk. The command ends at once, with
     one line (exit 1; how many chunks are written; no traceback) and whole parts. Run
     again on another cluster, it goes on from there: every row once, and the reference
@@ -544,10 +549,10 @@ def test_random_source_presets(tmp_path):
 def test_compare_two_sweep_folders(finished):
     """A sweep compared with itself: a row per point, mode and metric, every difference
     zero (the same scenes and points, read from the typed tables)."""
-    from sweeps.analysis.compare import compare
+    from sweeps.analysis.compare import METRICS, compare
 
     _, out, _, _ = finished
     result = compare(out, out, n_boot=200)
     assert {r["point"] for r in result["rows"]} == {0, 1}
-    assert len(result["rows"]) == 2 * 3 * 2
+    assert len(result["rows"]) == 2 * 3 * len(METRICS)
     assert all(r["diff"] in (0.0, None) and r["n_scenes"] <= 3 for r in result["rows"])
