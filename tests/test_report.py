@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 from geometry_precompute import InputError, shipped_scene_paths
-from sweeps.analysis.report import evaluate_report, sweep_report
+from sweeps.analysis.report import FIGURE_WIDTH, evaluate_report, sweep_report
 from sweeps.app.cli import main
 from sweeps.config import load_config
 from sweeps.distributed.runner import run_sweep
@@ -61,6 +61,8 @@ def check_in_browser(page: Path, tmp: Path) -> str:
     figures = int(re.search(r'data-figures="(\d+)"', body).group(1))
     loaded = int(re.search(r'data-figures-loaded="(\d+)"', body).group(1))
     assert figures > 0 and loaded == figures
+    # Every figure at least the chosen width (its natural width, read by the page).
+    assert int(re.search(r'data-narrowest-figure="(\d+)"', body).group(1)) >= FIGURE_WIDTH
     # The page's own console: no uncaught error, no failed load.
     console = [ln for ln in log.splitlines() if "CONSOLE" in ln]
     assert not [ln for ln in console if "rror" in ln], console
@@ -107,7 +109,31 @@ def test_sweep_report_numbers_are_the_datasets(sweep_folder):
     assert html.count('<table class="drawn">') == scenes["point"].nunique()
     # Nothing from outside the page.
     assert not re.search(r"(src|href)=\"(https?:)?//", html)
-    assert html.count("<img") == 4  # per-point bars (few points), two axes, one heat map
+    # Per-point bars (few points), the assistance shares, two axes, two heat maps.
+    assert html.count("<img") == 6
+    check_layout(html)
+
+
+def check_layout(html: str) -> None:
+    """A headline first (a sentence per comparison with its interval), then figures,
+    then tables (long ones folded); heat maps of success on 0-1, differences on a
+    scale centred on 0."""
+    head = re.search(r'<section class="headline">(.*?)</section>', html, re.S).group(1)
+    sentences = re.findall(r"<li>(.*?)</li>", head)
+    assert sentences[0].startswith("Success over ")
+    assert any(re.match(r"ShaCC against the baseline: success [+-]\d\.\d{3} \[[+-]\d\.\d{3}, "
+                        r"[+-]\d\.\d{3}\] \(paired, over \d+ scenes", s_) for s_ in sentences)
+    assert html.index('<section class="headline">') < html.index("<figure") \
+        < html.index("<table")
+    assert html.rindex("<figure") < html.index("<table")  # every figure before
+    for table in re.findall(r"(<details><summary>\d+ rows.*?</details>)", html, re.S):
+        assert table.count("<tr>") > 12
+    scales = re.findall(r'<figure class="heatmap" data-scale="([^"]+)" data-colormap="(\w+)"',
+                        html)
+    if scales:
+        assert scales[0] == ("0.0,1.0", "viridis")
+        lo, hi = map(float, scales[1][0].split(","))
+        assert scales[1][1] == "RdBu" and lo == -hi and hi >= 0.05
 
 
 @pytest.mark.browser
@@ -139,6 +165,7 @@ def test_evaluate_report_in_a_browser(tmp_path):
         for t in d["tasks_detail"]:
             assert t["id"] in dom
     assert '<table class="paired">' in dom
+    check_layout(dom)
 
 
 def test_report_refuses_what_it_cannot_read(tmp_path, capsys):

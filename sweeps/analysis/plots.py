@@ -22,9 +22,12 @@ from scipy.spatial import ConvexHull
 
 MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c",
                "optimized": "#9467bd"}
+# A marker per mode as well as a colour: lines that coincide stay told apart.
+MODE_MARKERS = {"baseline": "s", "shrinking": "^", "shacc": "o", "optimized": "D"}
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
 
-__all__ = ["MODE_COLORS", "OUTCOME_COLORS", "category_bars", "correlation_panels",
+__all__ = ["MODE_COLORS", "MODE_MARKERS", "OUTCOME_COLORS", "assistance_bars",
+           "category_bars", "correlation_panels",
            "robustness_lines", "scene_gallery", "scene_top_view", "space_shadows_yz",
            "success_fields", "success_fields_with_spaces", "sweep_heatmap", "sweep_lines",
            "swept_axes"]
@@ -115,7 +118,7 @@ def category_bars(categories: dict, metric: str, modes: Sequence[str], path=None
         >>> fig = category_bars(cats, "u_scene", ["baseline", "shacc"], ylabel="success")
     """
     names = [c for c in categories if categories[c]["n_scenes"] > 0]
-    fig, (a,) = _figure(ax, 1, (1.6 * len(names) + 2, 3.4))
+    fig, (a,) = _figure(ax, 1, (min(1.6 * len(names) + 2, 9.0), 3.4))
     width = 0.8 / len(modes)
     for k, mode in enumerate(modes):
         means: list[float] = []
@@ -620,43 +623,63 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     df["_combo"] = df[[f"set.{o}" for o in other]].apply(
         lambda r: ", ".join(f"{o}={_label(v)}" for o, v in zip(other, r, strict=True)), axis=1) \
         if other and others == "lines" else ""
-    fig, (a,) = _figure(ax)
+    fig, (a,) = _figure(ax, 1, (6.4, 3.6))
     styles = ["-", "--", ":", "-."]
     combos = sorted(df["_combo"].unique())
-    for mode in modes:
+    # The modes' points are set a little apart along x (a fiftieth of the smallest gap
+    # between values), so that modes with equal means stay visible side by side.
+    numeric = pd_is_numeric(df["_x"])
+    values = np.unique(df["_x"].to_numpy(float)) if numeric else np.arange(df["_x"].nunique())
+    gap = float(np.diff(values).min()) if len(values) > 1 else 1.0
+    for k_mode, mode in enumerate(modes):
+        shift = (k_mode - (len(modes) - 1) / 2) * gap / 50
         for k, combo in enumerate(combos):
             g = df[df["_combo"] == combo]
             pts = group_means(g, ["_x"], f"{mode}.{metric}", n_resamples, seed,
                               marginalise=other if others == "marginalise" else None)
-            xs = [p["_x"] for p in pts]
+            xs = np.array([p["_x"] for p in pts], float) + shift if numeric else \
+                np.array([p["_x"] for p in pts], object)
             ms = np.array([np.nan if p["mean"] is None else p["mean"] for p in pts])
             lo = np.array([m if p["ci"] is None else p["ci"][0]
                            for p, m in zip(pts, ms, strict=True)])
             hi = np.array([m if p["ci"] is None else p["ci"][1]
                            for p, m in zip(pts, ms, strict=True)])
             label = mode if not combo else f"{mode}, {combo}"
-            a.errorbar(xs, ms, yerr=[ms - lo, hi - ms], marker="o", capsize=3, label=label,
+            a.errorbar(xs, ms, yerr=[ms - lo, hi - ms], marker=MODE_MARKERS.get(mode, "o"),
+                       ms=5, mfc="none" if k_mode % 2 else None, capsize=3, label=label,
                        color=MODE_COLORS.get(mode), ls=styles[k % len(styles)])
     a.set_xlabel(axis)
     a.set_ylabel(metric)
     if other and others == "marginalise":
         a.set_title(f"mean over {', '.join(other)} (scenes resampled as clusters)",
                     fontsize=8)
-    if len(combos) > 1:  # many lines: the legend beside the axes, never over the data
-        a.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
-    else:
-        a.legend(fontsize=8)
+    # The legend beside the axes, never over the data.
+    a.legend(fontsize=7 if len(combos) > 1 else 8, loc="upper left",
+             bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     a.grid(alpha=0.3)
     if ax is None:
         fig.tight_layout()
     return _save(fig, path)
 
 
+def pd_is_numeric(column) -> bool:
+    """Whether every value of a column of setting values is a number."""
+    return all(isinstance(v, (int, float, np.integer, np.floating)) for v in column)
+
+
 def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, path=None,
-                  ax=None):
+                  ax=None, scale: tuple[float, float] | None = (0.0, 1.0),
+                  minus: str | None = None):
     """Mean ``metric`` of ``mode`` over scenes at each point of a two-axis sweep (each
     cell one point: its own scenes). Other swept settings must be fixed first (a
     table with repeated scenes in a cell is refused).
+
+    The colour scale is fixed (``scale``, 0 to 1 by default: success rates), so that
+    two pictures compare and a small difference is not drawn as the whole range;
+    ``None`` spans the data. With ``minus`` (another mode) each cell is the mean over
+    scenes of the paired difference ``mode - minus``, on a diverging scale centred on
+    0 (red: ``mode`` worse, blue: better) and symmetric around it. The colour bar's
+    limits are the image's (``fig.axes[0].images[0].get_clim()``).
 
     :param scenes_df: a sweep's ``scenes`` table; ``axis_x``, ``axis_y``: setting names.
 
@@ -668,8 +691,8 @@ def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, p
         ...                    "set.dt": [0.01, 0.01, 0.02, 0.02],
         ...                    "shacc.success": [0.9, 0.8, 0.8, 0.7]})
         >>> fig = sweep_heatmap(df, "v_max", "dt", "success", "shacc")
-        >>> fig.axes[0].get_title()
-        'shacc: success'
+        >>> fig.axes[0].get_title(), fig.axes[0].images[0].get_clim()
+        ('shacc: success', (0.0, 1.0))
     """
     df = scenes_df.copy()
     for a_ in (axis_x, axis_y):
@@ -678,18 +701,65 @@ def sweep_heatmap(scenes_df, axis_x: str, axis_y: str, metric: str, mode: str, p
         rest = ", ".join(swept_axes(scenes_df, [axis_x, axis_y]))
         raise ValueError(f"cells of {axis_x} x {axis_y} repeat scenes: select one value of "
                          f"the other swept settings ({rest}) first")
-    table = df.pivot_table(index=axis_y, columns=axis_x, values=f"{mode}.{metric}",
-                           aggfunc="mean")
-    fig, (a,) = _figure(ax, 1, (4.8, 3.8))
-    im = a.imshow(table.to_numpy(), origin="lower", cmap="viridis", aspect="auto")
+    value = df[f"{mode}.{metric}"]
+    if minus is not None:
+        value = value - df[f"{minus}.{metric}"]
+    table = df.assign(_v=value).pivot_table(index=axis_y, columns=axis_x, values="_v",
+                                            aggfunc="mean")
+    grid = table.to_numpy(float)
+    if minus is not None:  # symmetric around 0, in steps of 0.05 (at least +-0.05)
+        reach = float(np.nanmax(np.abs(grid))) if np.isfinite(grid).any() else 0.0
+        limit = max(0.05, float(np.ceil(reach / 0.05 - 1e-9)) * 0.05)
+        vmin, vmax, cmap = -limit, limit, "RdBu"
+    elif scale is not None:
+        (vmin, vmax), cmap = scale, "viridis"
+    else:
+        vmin, vmax, cmap = float(np.nanmin(grid)), float(np.nanmax(grid)), "viridis"
+    fig, (a,) = _figure(ax, 1, (5.6, 4.0))
+    im = a.imshow(grid, origin="lower", cmap=cmap, vmin=vmin, vmax=vmax, aspect="auto")
     a.set_xticks(range(table.shape[1]), [_label(v) for v in table.columns])
     a.set_yticks(range(table.shape[0]), [_label(v) for v in table.index])
-    for (i, j), v in np.ndenumerate(table.to_numpy()):
-        a.text(j, i, f"{v:.2f}", ha="center", va="center", color="w", fontsize=8)
+    for (i, j), v in np.ndenumerate(grid):
+        r, g_, b, _ = im.cmap(im.norm(v))  # dark text on light cells, light on dark
+        light = 0.299 * r + 0.587 * g_ + 0.114 * b > 0.55
+        a.text(j, i, f"{v:+.3f}" if minus else f"{v:.3f}", ha="center", va="center",
+               color="#222" if light else "w", fontsize=8)
     a.set_xlabel(axis_x)
     a.set_ylabel(axis_y)
-    a.set_title(f"{mode}: {metric}")
+    a.set_title(f"{mode} - {minus}: {metric}" if minus else f"{mode}: {metric}")
     fig.colorbar(im, ax=a)
+    if ax is None:
+        fig.tight_layout()
+    return _save(fig, path)
+
+
+def assistance_bars(shares: dict, kinds: Sequence[str], path=None, ax=None):
+    """Per mode, the share of the approaches' steps under each kind of assistance, as
+    one stacked horizontal bar (a row per mode; the shares of a mode sum to 1).
+
+    :param shares: mode -> {kind: share}; ``kinds``: the order of the stack.
+
+    Example::
+
+        >>> fig = assistance_bars({"baseline": {"none": 0.7, "scene": 0.0},
+        ...                        "shacc": {"none": 0.5, "scene": 0.2}},
+        ...                       ["none", "scene"])
+    """
+    modes = list(shares)
+    fig, (a,) = _figure(ax, 1, (6.4, 0.5 * len(modes) + 1.4))
+    colors = ["#d9d9d9", "#2ca02c", "#1f77b4", "#d62728", "#9467bd", "#8c564b"]
+    left = np.zeros(len(modes))
+    for k, kind in enumerate(kinds):
+        v = np.array([float(shares[m].get(kind) or 0.0) for m in modes])
+        a.barh(range(len(modes)), v, left=left, color=colors[k % len(colors)], label=kind,
+               edgecolor="white")
+        left += v
+    a.set_yticks(range(len(modes)), modes)
+    a.invert_yaxis()
+    a.set_xlim(0, 1)
+    a.set_xlabel("share of the approaches' steps")
+    a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0,
+             title="assistance", title_fontsize=8)
     if ax is None:
         fig.tight_layout()
     return _save(fig, path)

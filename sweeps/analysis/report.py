@@ -1,25 +1,31 @@
 """``shacc report DIR|FILE``: one self-contained HTML page of a sweep folder or of an
-``evaluate --json`` file, figures embedded, for a browser, a lab notebook or a paper's
-supplement.
+``evaluate --json`` file, figures embedded, for a lab meeting, a lab notebook or a
+paper's supplement.
 
-For a sweep: per point and mode the mean success and delta_R over scenes with 95 %
-bootstrap CIs over scenes; the paired differences between modes (ShaCC and Shrinking
-against the baseline, the optimized mode against Shrinking) per point; the tasks by
-template and object kind; every swept setting against success (the other settings
-never pooled: a line per combination, or averaged within each scene and said so when
-there are many); a heat map over the first two swept settings; and the provenance (the
-command, the versions, the devices). For an evaluate file: a row per scene and mode,
-a row per task, the paired mode differences over the scenes, and the provenance.
+The page reads top down as a talk would: a headline (one sentence per comparison that
+matters: ShaCC and Shrinking against the baseline, the optimized mode against
+Shrinking, each a paired difference of success over scenes with its 95 % interval and
+what it says), then the figures (success per point and mode; the share of steps under
+each assistance; every swept setting against success, the other settings never pooled:
+a line per combination, or averaged within each scene and said so when there are many;
+over the first two swept settings a heat map of ShaCC's success on a fixed 0-1 scale
+and one of its difference to the baseline on a diverging scale centred on 0), then the
+tables (per point and mode; the paired differences; time, path and assistance; the
+drawn users when the run drew them; the tasks by template), long ones folded, and the
+provenance (the command, the versions, the devices) last.
 
-Intervals use ``REPORT_RESAMPLES`` bootstrap resamples (the page says so). The page
-loads nothing from outside; a small script only counts the figures that decoded, into
-``data-figures-loaded`` on its body, for the browser test.
+Every figure is at least ``FIGURE_WIDTH`` pixels wide, its legend outside the axes; the
+modes' lines carry markers and are set a little apart so that equal ones stay visible.
+Intervals use ``REPORT_RESAMPLES`` bootstrap resamples (the page says so). The page is
+rendered from the Jinja2 template ``templates/report.html`` and loads nothing from
+outside; a small script counts the figures that decoded and the narrowest one's width,
+into ``data-figures-loaded`` and ``data-narrowest-figure`` on its body, for the browser
+test.
 """
 
 from __future__ import annotations
 
 import base64
-import html
 import io
 import json
 from pathlib import Path
@@ -32,31 +38,16 @@ from sweeps.analysis.stats import group_means, mean_ci, paired_diff_ci
 REPORT_RESAMPLES = 2000
 PAIRS = (("baseline", "shrinking"), ("baseline", "shacc"), ("shrinking", "shacc"),
          ("shrinking", "optimized"))
-
-STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px;
-       color: #222; line-height: 1.4; }
-h1 { font-size: 1.6em; } h2 { font-size: 1.25em; margin-top: 1.8em; }
-table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.9em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-th { background: #f2f2f2; } td.l, th.l { text-align: left; }
-figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
-.note { color: #555; font-size: 0.9em; }
-pre { background: #f6f6f6; padding: 0.6em; overflow-x: auto; font-size: 0.85em; }
-"""
-
-SCRIPT = """
-window.addEventListener("load", function () {
-  var imgs = Array.prototype.slice.call(document.images);
-  var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; });
-  document.body.dataset.figuresLoaded = String(ok.length);
-  document.body.dataset.figures = String(imgs.length);
-});
-"""
-
-
-def _e(v) -> str:
-    return html.escape(str(v))
+# The comparisons the headline states (new against old), in this order.
+HEADLINE_PAIRS = (("baseline", "shacc"), ("baseline", "shrinking"), ("shrinking", "optimized"))
+MODE_NAMES = {"baseline": "the baseline", "shrinking": "Shrinking", "shacc": "ShaCC",
+              "optimized": "the optimized mode"}
+FIGURE_WIDTH = 760  # px: the narrowest a figure is embedded (its natural width)
+PAGE_WIDTH = 1000  # px: the text column
+FOLD_ROWS = 12  # tables longer than this are folded (<details>)
+INTERVALS = ("Every interval is a 95 % percentile bootstrap over scenes ({n} resamples); "
+             "a difference of two modes is paired (the per-scene differences are "
+             "resampled).")
 
 
 def _fmt(v, digits: int = 3) -> str:
@@ -75,37 +66,88 @@ def _ci(e: dict, digits: int = 3, signed: bool = False) -> str:
     return text
 
 
-def _table(head: list[str], rows: list[list], left: int = 1, cls: str = "") -> str:
-    out = [f'<table class="{cls}"><tr>' + "".join(
-        f'<th class="{"l" if i < left else ""}">{_e(h)}</th>' for i, h in enumerate(head))
-        + "</tr>"]
-    for r in rows:
-        out.append("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(c)}</td>'
-                                    for i, c in enumerate(r)) + "</tr>")
-    return "\n".join(out) + "</table>"
+def _table(head: list[str], rows: list[list], left: int = 1, cls: str = "",
+           sentence: str = "") -> dict:
+    return {"head": head, "rows": [[str(c) for c in r] for r in rows], "left": left,
+            "cls": cls, "sentence": sentence}
 
 
-def _figure(fig, caption: str) -> str:
+def _section(title: str, tables: list[dict], note: str = "") -> dict:
+    return {"title": title, "note": note, "tables": tables}
+
+
+def _png_width(png: bytes) -> int:
+    return int.from_bytes(png[16:20], "big")  # the IHDR chunk's width
+
+
+def _figure(fig, caption: str) -> dict:
+    """The figure as an embedded PNG at least ``FIGURE_WIDTH`` pixels wide (made wider
+    and saved again when its tight bounding box came out narrower), with its colour
+    scale when it is a heat map."""
     import matplotlib.pyplot as plt  # deferred: 1.2 s to import
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    scale = cmap = None
+    if fig.axes and fig.axes[0].images:
+        image = fig.axes[0].images[0]
+        scale = tuple(float(v) for v in image.get_clim())
+        cmap = image.get_cmap().name
+    for _ in range(3):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        png = buf.getvalue()
+        if _png_width(png) >= FIGURE_WIDTH:
+            break
+        # Wider, not enlarged: the text keeps its size and the axes get the room.
+        w, h = fig.get_size_inches()
+        fig.set_size_inches(w * FIGURE_WIDTH / _png_width(png) * 1.03, h)
+        fig.tight_layout()
     plt.close(fig)
-    data = base64.b64encode(buf.getvalue()).decode()
-    return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}">'
-            f"<figcaption>{_e(caption)}</figcaption></figure>")
+    return {"data": base64.b64encode(png).decode(), "caption": caption,
+            "width": _png_width(png), "scale": scale, "cmap": cmap}
 
 
-def _page(title: str, body: list[str]) -> str:
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>{_e(title)}</title><style>{STYLE}</style></head><body>"
-            f"<h1>{_e(title)}</h1>\n" + "\n".join(body)
-            + f"<script>{SCRIPT}</script></body></html>\n")
+def _page(title: str, summary: str, headline: list[str], figures: list[dict],
+          sections: list[dict], provenance: Any, n_boot: int) -> str:
+    import jinja2  # deferred: 40 ms to import
+
+    env = jinja2.Environment(loader=jinja2.PackageLoader("sweeps.analysis", "templates"),
+                             autoescape=True, keep_trailing_newline=True)
+    return env.get_template("report.html").render(
+        title=title, summary=summary, headline=headline, figures=figures,
+        sections=sections, provenance=json.dumps(provenance, indent=1, default=str),
+        intervals=INTERVALS.format(n=n_boot), fold_rows=FOLD_ROWS,
+        figure_width=FIGURE_WIDTH, page_width=PAGE_WIDTH,
+        no_headline="Only one mode was evaluated: there is no comparison to state.")
 
 
-def _provenance_section(prov) -> str:
-    return ("<h2>Provenance</h2><pre>" + _e(json.dumps(prov, indent=1, default=str))
-            + "</pre>")
+def _headline(per_scene: dict[str, np.ndarray], modes: list[str], n_boot: int,
+              over: str = "") -> list[str]:
+    """One sentence per comparison that matters: the paired difference of success over
+    scenes, its interval and what it says; first the modes' own success.
+
+    :param per_scene: mode -> (S,) success per scene (averaged over points first).
+    :param over: how the scenes' values were made (", averaged over 4 points")."""
+    n = len(next(iter(per_scene.values())))
+    lines = ["Success over " + (f"{n} scenes" if n != 1 else "one scene") + over + ": "
+             + ", ".join(f"{MODE_NAMES.get(m, m)} {_ci(mean_ci(per_scene[m], n_boot))}"
+                         for m in modes) + "."]
+    for a, b in HEADLINE_PAIRS:
+        if a not in modes or b not in modes:
+            continue
+        d = paired_diff_ci(per_scene[a], per_scene[b], n_boot)
+        name_b = MODE_NAMES.get(b, b)
+        name_b = name_b[0].upper() + name_b[1:]
+        if not d.get("ci"):
+            verdict = "one scene: no interval, so no verdict"
+        elif d["ci"][0] > 0:
+            verdict = f"better than {MODE_NAMES[a]}"
+        elif d["ci"][1] < 0:
+            verdict = f"worse than {MODE_NAMES[a]}"
+        else:
+            verdict = f"not told apart from {MODE_NAMES[a]} with {d['n']} scenes"
+        lines.append(f"{name_b} against {MODE_NAMES[a]}: success {_ci(d, 3, True)} "
+                     f"(paired, over {d['n']} scenes{over}): {verdict}.")
+    return lines if len(modes) > 1 else []
 
 
 def _paired_rows(frame, modes, by_point: bool, n_boot: int) -> list[list]:
@@ -124,9 +166,19 @@ def _paired_rows(frame, modes, by_point: bool, n_boot: int) -> list[list]:
     return rows
 
 
+def _assistance_figure(shares: dict, kinds) -> dict:
+    from sweeps.analysis import plots  # deferred: 1.4 s to import
+
+    return _figure(plots.assistance_bars(shares, kinds),
+                   "share of the approaches' steps under each kind of assistance, per mode "
+                   "(mean over scenes; none: unassisted; scene: the meta skill; correct "
+                   "and wrong: towards the intended or another task)")
+
+
 def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     import pandas as pd  # deferred: 1.0 s to import
 
+    from geometry_precompute.schema import ASSISTANCE  # deferred: 20 ms to import
     from sweeps.analysis import plots  # deferred: 1.4 s to import
     from sweeps.analysis.compare import read_scenes_table  # deferred: 8 ms to import
 
@@ -139,16 +191,19 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     modes = [c.split(".")[0] for c in scenes.columns if c.endswith(".success")]
     axes = plots.swept_axes(scenes)
     n_points = scenes["point"].nunique()
-    body = [f'<p class="note">{len(scenes)} scene rows, {n_points} '
-            f'point{"s" if n_points != 1 else ""}, '
-            f"modes {', '.join(modes)}. Every interval is a 95 % percentile bootstrap over "
-            f"scenes ({n_boot} resamples); a difference of two modes is paired (per-scene "
-            "differences resampled).</p>"]
+    n_scenes = scenes["scene_index"].nunique()
+    summary = (f"{n_scenes} scenes at {n_points} point{'s' if n_points != 1 else ''} "
+               f"({len(scenes)} scene rows); modes {', '.join(modes)}"
+               + (f"; swept: {', '.join(axes)}" if axes else "") + ".")
+    per_scene = {m: scenes.groupby("scene_index")[f"{m}.success"].mean().to_numpy(float)
+                 for m in modes}
+    headline = _headline(per_scene, modes, n_boot,
+                         f", averaged over {n_points} points" if n_points > 1 else "")
+    figures: list[dict] = []
     # Per point and mode.
     rows = []
     point_cols = [c for c in scenes.columns if c.startswith("set.")]
     first = scenes.drop_duplicates("point").set_index("point")
-    # The same success intervals, drawn below when there are few points.
     bars: dict[str, dict[str, Any]] = {}
     for p, g in scenes.groupby("point", sort=True):
         label = ", ".join(f"{c[4:]}={plots._label(first.loc[p, c])}" for c in point_cols
@@ -160,68 +215,78 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
             rows.append([p, label, mode, _ci(success),
                          _ci(group_means(g, ["point"], f"{mode}.delta_R_mean", n_boot)[0]),
                          len(g)])
-    body += ["<h2>Success and delta_R per point and mode</h2>",
-             _table(["point", "settings", "mode", "success [95 % CI]",
-                     "delta_R (rad) [95 % CI]", "scenes"], rows, left=3, cls="modes")]
     if n_points <= 8:
-        body.append(_figure(plots.category_bars(bars, "success", modes, ylabel="mean success"),
-                            "mean success per point and mode (95 % CI over scenes)"))
-    body += ["<h2>Paired differences between modes</h2>",
-             _table(["point", "difference", "metric", "mean [95 % CI]", "scenes"],
-                    _paired_rows(scenes, modes, True, n_boot), left=3, cls="paired")]
-    body += _how_long_sweep(scenes, modes, n_boot)
-    body += _drawn_sweep(folder, modes, n_boot)
+        figures.append(_figure(plots.category_bars(bars, "success", modes,
+                                                   ylabel="mean success"),
+                               "mean success per point and mode (95 % CI over scenes)"))
+    assist_cols = [f"{m}.assist_{k}" for m in modes for k in ASSISTANCE]
+    if all(c in scenes.columns for c in assist_cols):
+        figures.append(_assistance_figure(
+            {m: {k: float(scenes[f"{m}.assist_{k}"].mean()) for k in ASSISTANCE}
+             for m in modes}, ASSISTANCE))
+    sections = [_section("Success and delta_R per point and mode", [_table(
+        ["point", "settings", "mode", "success [95 % CI]", "delta_R (rad) [95 % CI]",
+         "scenes"], rows, left=3, cls="modes")]),
+        _section("Paired differences between modes", [_table(
+            ["point", "difference", "metric", "mean [95 % CI]", "scenes"],
+            _paired_rows(scenes, modes, True, n_boot), left=3, cls="paired")])]
+    sections += _how_long_sweep(scenes, modes, n_boot)
+    sections += _drawn_sweep(folder, modes, n_boot)
     # Tasks, by template and object kind (the scenes' own task ids differ).
     if (folder / "tasks").is_dir():
         tasks = pd.read_parquet(folder / "tasks")
         rows = []
         for (template, kind), g in tasks.groupby(["template", "object_kind"], sort=True):
             for mode in modes:
-                per_scene = g.groupby(["point", "scene_index"])[f"{mode}.success"].mean()
-                frame = per_scene.reset_index()
+                frame = g.groupby(["point", "scene_index"])[f"{mode}.success"].mean() \
+                    .reset_index()
                 e = group_means(frame.assign(all=0), ["all"], f"{mode}.success", n_boot,
                                 marginalise=["point"] if frame["point"].nunique() > 1 else None)[0]
                 rows.append([template, kind, mode, _ci(e), len(g)])
-        body += ["<h2>Tasks by template</h2>", '<p class="note">Success of the tasks of one '
-                 "template (averaged within each scene, scenes resampled; over all points)."
-                 "</p>", _table(["template", "object", "mode", "success [95 % CI]", "tasks"],
-                                rows, left=3, cls="tasks")]
-    # Every axis, and a heat map over two.
-    if axes:
-        body.append("<h2>Swept settings</h2>")
-        for axis in axes:
-            others = plots.swept_axes(scenes, exclude=[axis])
-            combos = scenes[[f"set.{o}" for o in others]].astype(str).drop_duplicates() \
-                if others else []
-            how = "lines" if len(combos) <= 4 else "marginalise"
-            fig = plots.sweep_lines(scenes, axis, "success", modes, n_resamples=n_boot,
-                                    others=how)
-            if not others:
-                caption = f"success against {axis}"
-            elif how == "lines":
-                caption = (f"success against {axis} (a line per combination of "
-                           f"{', '.join(others)})")
-            else:
-                caption = (f"success against {axis} (averaged within each scene over "
-                           f"{', '.join(others)})")
-            body.append(_figure(fig, caption))
-        if len(axes) >= 2:
-            x, y = axes[:2]
-            sel = scenes
-            fixed = []
-            for o in axes[2:]:
-                v = sel[f"set.{o}"].map(plots._label).iloc[0]
-                sel = sel[sel[f"set.{o}"].map(plots._label) == v]
-                fixed.append(f"{o}={v}")
-            mode = "shacc" if "shacc" in modes else modes[-1]
-            fig = plots.sweep_heatmap(sel, x, y, "success", mode)
-            body.append(_figure(fig, f"{mode} success over {x} and {y}"
-                                + (f" ({', '.join(fixed)})" if fixed else "")))
-    body.append(_provenance_section({"config": config.get("provenance"),
-                                     "config_hash": config.get("hash"),
-                                     "evaluated_on": _part_provenance(folder)}))
+        sections.append(_section(
+            "Tasks by template", [_table(["template", "object", "mode", "success [95 % CI]",
+                                          "tasks"], rows, left=3, cls="tasks")],
+            "Success of the tasks of one template (averaged within each scene, scenes "
+            "resampled; over all points)."))
+    # Every axis, and heat maps over two.
+    for axis in axes:
+        others = plots.swept_axes(scenes, exclude=[axis])
+        combos = scenes[[f"set.{o}" for o in others]].astype(str).drop_duplicates() \
+            if others else []
+        how = "lines" if len(combos) <= 4 else "marginalise"
+        fig = plots.sweep_lines(scenes, axis, "success", modes, n_resamples=n_boot,
+                                others=how)
+        if not others:
+            caption = f"success against {axis}"
+        elif how == "lines":
+            caption = f"success against {axis} (a line per combination of {', '.join(others)})"
+        else:
+            caption = (f"success against {axis} (averaged within each scene over "
+                       f"{', '.join(others)})")
+        figures.append(_figure(fig, caption + "; mean over scenes with 95 % CI, the modes "
+                               "set slightly apart along x so that equal ones stay visible"))
+    if len(axes) >= 2:
+        x, y = axes[:2]
+        sel = scenes
+        fixed = []
+        for o in axes[2:]:
+            v = sel[f"set.{o}"].map(plots._label).iloc[0]
+            sel = sel[sel[f"set.{o}"].map(plots._label) == v]
+            fixed.append(f"{o}={v}")
+        mode = "shacc" if "shacc" in modes else modes[-1]
+        where = f" ({', '.join(fixed)})" if fixed else ""
+        figures.append(_figure(plots.sweep_heatmap(sel, x, y, "success", mode),
+                               f"{mode} success over {x} and {y}{where}, on a fixed 0-1 "
+                               "scale"))
+        if "baseline" in modes and mode != "baseline":
+            figures.append(_figure(
+                plots.sweep_heatmap(sel, x, y, "success", mode, minus="baseline"),
+                f"{mode} - baseline success over {x} and {y}{where} (the mean paired "
+                "difference; blue: better than the baseline, red: worse; centred on 0)"))
+    provenance = {"config": config.get("provenance"), "config_hash": config.get("hash"),
+                  "evaluated_on": _part_provenance(folder)}
     name = (config.get("config") or {}).get("name") or folder.name
-    return _page(f"Sweep {name}", body)
+    return _page(f"Sweep {name}", summary, headline, figures, sections, provenance, n_boot)
 
 
 HOW_LONG_NOTE = ("the mean time to activation (s) and path length (m) of the successful "
@@ -235,7 +300,7 @@ DRAWN_NOTE = ("The approaches binned by quartiles of each drawn user setting; pe
               "to the baseline (95 % CI over scenes).")
 
 
-def _drawn_table(entry: dict, modes: list[str], lead: str = "") -> str:
+def _drawn_table(entry: dict, modes: list[str], lead: str = "") -> dict:
     """One drawn parameter's bins (success per mode, difference to the baseline) and its
     sentence."""
     others = [m for m in modes if m != "baseline"]
@@ -243,11 +308,11 @@ def _drawn_table(entry: dict, modes: list[str], lead: str = "") -> str:
                   + [f"{m} - baseline" for m in others],
                   [[r["level"]] + [_ci(r["modes"][m]["u_scene"]) for m in modes]
                    + [_ci(r["vs_baseline"][m], 3, True) for m in others]
-                   for r in entry["rows"]], left=1, cls="drawn") + \
-        f'<p>{_e(lead + entry["sentence"])}</p>'
+                   for r in entry["rows"]], left=1, cls="drawn",
+                  sentence=lead + entry["sentence"])
 
 
-def _how_long_sweep(scenes, modes: list[str], n_boot: int) -> list[str]:
+def _how_long_sweep(scenes, modes: list[str], n_boot: int) -> list[dict]:
     """Per point and mode: time, path and the assistance shares, each the mean over
     scenes with its CI (empty for a dataset written before these columns)."""
     from geometry_precompute.schema import ASSISTANCE  # deferred: 20 ms to import
@@ -260,14 +325,13 @@ def _how_long_sweep(scenes, modes: list[str], n_boot: int) -> list[str]:
         for mode in modes:
             rows.append([p, mode] + [_ci(group_means(g, ["point"], f"{mode}.{c}", n_boot)[0],
                                          2 if c == "time_mean" else 3) for c in cols])
-    return ["<h2>How long, and how assisted</h2>",
-            f'<p class="note">Per point and mode: {HOW_LONG_NOTE}; each the mean over '
-            "scenes [95 % CI].</p>",
-            _table(["point", "mode", "time (s)", "path (m)"]
-                   + [f"assisted: {k}" for k in ASSISTANCE], rows, left=2, cls="time")]
+    return [_section("How long, and how assisted", [_table(
+        ["point", "mode", "time (s)", "path (m)"] + [f"assisted: {k}" for k in ASSISTANCE],
+        rows, left=2, cls="time")],
+        f"Per point and mode: {HOW_LONG_NOTE}; each the mean over scenes [95 % CI].")]
 
 
-def _drawn_sweep(folder: Path, modes: list[str], n_boot: int) -> list[str]:
+def _drawn_sweep(folder: Path, modes: list[str], n_boot: int) -> list[dict]:
     """Success against the drawn users of a sweep with a population: per point,
     :func:`sweeps.analysis.robustness.drawn` of its rollouts table."""
     import pyarrow.dataset as ds  # deferred: 0.2 s to import
@@ -285,7 +349,7 @@ def _drawn_sweep(folder: Path, modes: list[str], n_boot: int) -> list[str]:
     table = data.to_table(columns=["point", "scene_index", "mode", "start", "task",
                                    "outcome", *names]).to_pandas()
     code = {o: i for i, o in enumerate(OUTCOMES)}
-    out: list[str] = []
+    out: list[dict] = []
     for p, g in table.groupby("point", sort=True):
         g = g[g["mode"].astype(str).isin(modes)]
         scene = g["scene_index"].to_numpy()
@@ -304,8 +368,7 @@ def _drawn_sweep(folder: Path, modes: list[str], n_boot: int) -> list[str]:
             out.append(_drawn_table(entry, modes, f"point {p}: "))
     if not out:
         return []
-    return ["<h2>Success against the drawn users</h2>", f'<p class="note">{DRAWN_NOTE}</p>',
-            *out]
+    return [_section("Success against the drawn users", out, DRAWN_NOTE)]
 
 
 def _part_provenance(folder: Path) -> list:
@@ -354,6 +417,7 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     import pandas as pd  # deferred: 1.0 s to import
 
     from geometry_precompute.schema import ASSISTANCE  # deferred: 20 ms to import
+    from sweeps.analysis import plots  # deferred: 1.4 s to import
     from sweeps.analysis.compare import json_rows, read_evaluate_json  # deferred: 8 ms to import
 
     lines = read_evaluate_json(path)
@@ -364,15 +428,31 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
                              aggfunc="first")
     wide.columns = [f"{m}.{v}" for v, m in wide.columns]
     wide = wide.reset_index().assign(point=0)
-    body = [f'<p class="note">{len(lines)} scenes, modes {", ".join(modes)}.</p>',
-            "<h2>Per scene</h2>",
-            _table(["scene", "C_init", "C_final"]
-                   + [f"{m} {what}" for m in modes for what in ("success", "delta_R (rad)")],
-                   [[d["scene"], _fmt(d["clutteredness"]["init"]),
-                     _fmt(d["clutteredness"]["final"])]
-                    + [_fmt(d["modes"].get(m, {}).get(k)) for m in modes
-                       for k in ("success_rate", "delta_R_mean")] for d in lines],
-                   left=1, cls="modes")]
+    summary = f"{len(lines)} scene{'s' if len(lines) != 1 else ''}; modes {', '.join(modes)}."
+    complete = wide.dropna(subset=[f"{m}.success" for m in modes])
+    headline = _headline({m: complete[f"{m}.success"].to_numpy(float) for m in modes},
+                         modes, n_boot)
+    means = {"all scenes": {"n_scenes": len(lines), **{
+        m: {"success": mean_ci(wide[f"{m}.success"].dropna().to_numpy(float), n_boot)}
+        for m in modes}}}
+    figures = [_figure(plots.category_bars(means, "success", modes, ylabel="mean success"),
+                       "mean success per mode (95 % CI over scenes)")]
+    shares = {m: {k: np.mean([float((d["modes"][m].get("assistance") or {}).get(k) or 0.0)
+                              for d in lines if m in d["modes"]]) for k in ASSISTANCE}
+              for m in modes}
+    if any(d["modes"][m].get("assistance") for d in lines for m in d["modes"]):
+        figures.append(_assistance_figure(shares, ASSISTANCE))
+    sections = [_section("Per scene", [_table(
+        ["scene", "C_init", "C_final"]
+        + [f"{m} {what}" for m in modes for what in ("success", "delta_R (rad)")],
+        [[d["scene"], _fmt(d["clutteredness"]["init"]), _fmt(d["clutteredness"]["final"])]
+         + [_fmt(d["modes"].get(m, {}).get(k)) for m in modes
+            for k in ("success_rate", "delta_R_mean")] for d in lines],
+        left=1, cls="modes")])]
+    if len(lines) > 1:
+        sections.append(_section("Paired differences between modes, over the scenes", [
+            _table(["difference", "metric", "mean [95 % CI]", "scenes"],
+                   _paired_rows(wide, modes, False, n_boot), left=2, cls="paired")]))
     per_scene = [[d["scene"], m, _fmt(e.get("time_to_activation_mean"), 2),
                   _fmt(e.get("path_length_mean"))]
                  + [_fmt((e.get("assistance") or {}).get(k)) for k in ASSISTANCE]
@@ -386,32 +466,23 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
             per_scene.append(["all scenes", m] + [
                 _ci(mean_ci(np.array(v, dtype=float), n_boot), 2 if i == 0 else 3)
                 for i, v in enumerate(values)])
-    body += ["<h2>How long, and how assisted</h2>",
-             f'<p class="note">Per scene and mode: {HOW_LONG_NOTE}; over all scenes, '
-             "the mean over scenes [95 % CI].</p>",
-             _table(["scene", "mode", "time (s)", "path (m)"]
-                    + [f"assisted: {k}" for k in ASSISTANCE], per_scene, left=2, cls="time")]
+    sections.append(_section("How long, and how assisted", [_table(
+        ["scene", "mode", "time (s)", "path (m)"] + [f"assisted: {k}" for k in ASSISTANCE],
+        per_scene, left=2, cls="time")],
+        f"Per scene and mode: {HOW_LONG_NOTE}; over all scenes, the mean over scenes "
+        "[95 % CI]."))
     drawn_section = _drawn_json(lines, modes, n_boot)
     if drawn_section:
-        body += ["<h2>Success against the drawn users</h2>", f'<p class="note">{DRAWN_NOTE}</p>']
-        body += [_drawn_table(entry, modes) for entry in drawn_section.values()]
+        sections.append(_section("Success against the drawn users",
+                                 [_drawn_table(entry, modes) for entry in
+                                  drawn_section.values()], DRAWN_NOTE))
     if task_rows:
-        body += ["<h2>Per task</h2>", _table(
+        sections.append(_section("Per task", [_table(
             ["scene", "task", "template", "object"] + [f"{m} success" for m in modes],
             [[d["scene"], t["id"], t["template"], t.get("object_kind", "")]
              + [_fmt(t["modes"].get(m, {}).get("success_rate")) for m in modes]
              for d in lines for t in d.get("tasks_detail", [])],
-            left=4, cls="tasks")]
-    if len(lines) > 1:
-        body += ["<h2>Paired differences between modes, over the scenes</h2>",
-                 _table(["difference", "metric", "mean [95 % CI]", "scenes"],
-                        _paired_rows(wide, modes, False, n_boot), left=2, cls="paired")]
-        from sweeps.analysis import plots  # deferred: 1.4 s to import
-
-        means = {"all scenes": {"n_scenes": len(lines), **{
-            m: {"success": mean_ci(wide[f"{m}.success"].dropna().to_numpy(float), n_boot)}
-            for m in modes}}}
-        fig = plots.category_bars(means, "success", modes, ylabel="mean success")
-        body.append(_figure(fig, "mean success per mode (95 % CI over scenes)"))
-    body.append(_provenance_section({d["scene"]: d.get("provenance") for d in lines[:1]}))
-    return _page(f"Evaluation {path.name}", body)
+            left=4, cls="tasks")]))
+    provenance = {d["scene"]: d.get("provenance") for d in lines[:1]}
+    return _page(f"Evaluation {path.name}", summary, headline, figures, sections,
+                 provenance, n_boot)
