@@ -92,6 +92,7 @@ def scene_from_dict(data, source: str = "<scene>") -> Scene:
         ['grasp']
     """
     scene = parse_scene(data, source)
+    _warn_units(scene)  # before the templates are fitted: their errors may be its cause
     _warn_legal_oddities(scene, resolve_tasks(scene, scene.settings()))
     return scene
 
@@ -105,7 +106,7 @@ def _warn_units(scene: Scene) -> None:
     """Warn, once per field, of values that look like degrees where radians are meant or
     centimetres where metres are."""
     def warn(field: str, text: str) -> None:
-        warnings.warn(SceneWarning(f"{scene.source}: {field}: {text}"), stacklevel=5)
+        warnings.warn(SceneWarning(f"{scene.source}: {field}: {text}"), stacklevel=4)
 
     for o in scene.objects:
         where = f"objects[{o.id}]"
@@ -128,11 +129,10 @@ def _warn_units(scene: Scene) -> None:
 
 
 def _warn_legal_oddities(scene: Scene, spaces) -> None:
-    """Things a scene may hold that are legal but rarely meant: values that look like a
-    unit mistake (:func:`_warn_units`); identical tasks on one object, whose spaces
-    coincide so that every rollout towards either is ambiguous; and a handle grasp
-    point inside another object's body."""
-    _warn_units(scene)
+    """Things a scene may hold that are legal but rarely meant (besides the unit slips
+    of :func:`_warn_units`, checked before the templates are fitted): identical tasks
+    on one object, whose spaces coincide so that every rollout towards either is
+    ambiguous; and a handle grasp point inside another object's body."""
     seen: dict[tuple, str] = {}
     for t in scene.tasks:
         key = (t.object, t.template, tuple(sorted(t.bounds.items())),

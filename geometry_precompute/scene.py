@@ -141,6 +141,27 @@ DEG_FIELDS = {"yaw_deg": "yaw", "half_angle_deg": "half_angle"}
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 
 
+def _unit_slip(value: float, limit: float) -> str:
+    """A number past a metre limit that fits once read as centimetres or millimetres:
+    the words that say so, each reading that fits (empty if none does)."""
+    if value <= limit:
+        return ""
+    fits = [f"{value:g} {u} is {value / f:g} m" for f, u in ((100, "cm"), (1000, "mm"))
+            if value / f <= limit / 10]  # well inside once converted
+    return f"; a unit slip? {', '.join(fits)} (scenes are written in metres)" if fits else ""
+
+
+def ratio_slip(lo: float, hi: float) -> str:
+    """A lower bound 30 to 3 000 times its upper one, the factor a unit slip makes: the
+    words that say so (empty otherwise)."""
+    if not (hi > 0 and 30 <= lo / hi <= 3000):
+        return ""
+    factor = 100 if lo / hi < 300 else 1000
+    return (f"; min is {lo / hi:.0f} times init: a unit slip ({factor}x, "
+            f"{'centimetres' if factor == 100 else 'millimetres'} for metres) is the likely "
+            "cause")
+
+
 def _number(value: Any, src: str, fld: str, positive: bool = False,
             limit: float = COORD_LIMIT) -> float:
     """A finite number; a size (``positive``) in (0, LENGTH_LIMIT], anything else within
@@ -152,9 +173,10 @@ def _number(value: Any, src: str, fld: str, positive: bool = False,
         raise InputError(src, fld, "must be finite (no NaN or inf)")
     if positive and not 0 < value <= LENGTH_LIMIT:
         raise InputError(src, fld, f"must be > 0 and at most {LENGTH_LIMIT:g} m, got "
-                         f"{shown(value)}")
+                         f"{shown(value)}" + _unit_slip(value, LENGTH_LIMIT))
     if not positive and abs(value) > limit:
-        raise InputError(src, fld, f"must be within [-{limit:g}, {limit:g}], got {shown(value)}")
+        raise InputError(src, fld, f"must be within [-{limit:g}, {limit:g}], got {shown(value)}"
+                         + _unit_slip(abs(value), limit))
     return float(value)
 
 
@@ -282,7 +304,8 @@ def _parse_task(raw: Any, i: int, src: str, objects: Mapping[str, SceneObject],
         else:
             lo, hi = _vector(value, 2, src, f"{where}bounds.{name}", positive=True)
         if lo > hi:
-            raise InputError(src, f"{where}bounds.{key}", f"min {lo} > init {hi}")
+            raise InputError(src, f"{where}bounds.{key}", f"min {lo} > init {hi}"
+                             + ratio_slip(lo, hi))
         bounds[name] = (lo, hi)
     fixed_raw = raw.get("fixed", {})
     _check_keys(fixed_raw, set(spec.fixed_names), set(), src, where + "fixed.")

@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import InputError
 from .frames import IDENTITY, quat_of_approach, quat_of_rotation, yaw_matrix
-from .scene import Scene, SceneObject, Task
+from .scene import Scene, SceneObject, Task, ratio_slip
 from .settings import Settings
 from .shapes import Shape
 from .template_files import SHAPE_DIMS, Template, namespace, object_measures
@@ -183,6 +183,22 @@ def _run(code, ns: dict, scene: Scene, task: Task, fld: str) -> Any:
                          f"({e})") from None
 
 
+def _unit_hint(obj, lo: float, hi: float) -> str:
+    """Where a template does not fit its object because the scene was written in
+    centimetres or millimetres: the words that say so (empty otherwise). The object's
+    own sizes above a metre say it; so does a bound 30 to 3 000 times the other, the
+    factor a unit slip makes."""
+    sizes = {"radius": obj.radius, "height": obj.height}
+    if obj.half_extents is not None:
+        sizes = {"half extent": max(obj.half_extents)}
+    big = [(n, v) for n, v in sizes.items() if v is not None and v > 1.0]
+    if big:
+        name, v = big[0]
+        return (f"; the object's {name} is {v:g} m: if the scene is in centimetres, that is "
+                f"{v / 100:g} m (scenes are written in metres)")
+    return ratio_slip(lo, hi)
+
+
 def resolve_task(scene: Scene, task: Task, settings: Settings) -> TaskSpace:
     obj = scene.object(task.object)
     t = scene.templates[task.template]
@@ -201,7 +217,8 @@ def resolve_task(scene: Scene, task: Task, settings: Settings) -> TaskSpace:
         if not lo <= hi:
             raise InputError(scene.source, where,
                              f"min {lo:.4g} > init {hi:.4g} for this {obj.kind} (the template "
-                             "does not fit its object; set [tasks.bounds] or the settings)")
+                             "does not fit its object; set [tasks.bounds] or the settings)"
+                             + _unit_hint(obj, lo, hi))
         if p.unit == "rad" and not (0 < lo and hi < math.pi / 2):
             raise InputError(scene.source, where, f"an angle's bounds must lie in (0, pi/2), "
                              f"got [{lo:.4g}, {hi:.4g}]")

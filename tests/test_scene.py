@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import pytest
 from conftest import write_scene
@@ -14,6 +15,7 @@ from geometry_precompute import (
     scene_from_dict,
     shipped_scene_paths,
 )
+from geometry_precompute.errors import SceneWarning
 from geometry_precompute.scene import scene_to_dict
 
 BASE = """
@@ -243,3 +245,65 @@ def test_objects_without_tasks_and_several_tasks_per_object():
     d["tasks"].append({"id": "top-b", "object": "b", "template": "top_grasp"})
     scene = scene_from_dict(d)
     assert len(scene.objects) == 3 and len(scene.tasks) == 3
+
+
+CM_SCENE = """name = "cm"
+[[objects]]
+id = "a"
+kind = "mug"
+position = [0, -45, 0]
+radius = 4
+height = 10
+[[objects]]
+id = "b"
+kind = "mug"
+position = [0, 0, 0]
+radius = 4
+height = 10
+[[tasks]]
+id = "ta"
+object = "a"
+template = "side_grasp"
+"""
+
+
+def test_a_scene_in_centimetres_is_warned_before_its_template_error(tmp_path):
+    """The unit warnings come before the error they may explain, and the error names
+    the unit as its likely cause."""
+    path = write_scene(tmp_path, CM_SCENE)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        with pytest.raises(InputError) as e:
+            load_scene(path)
+    said = [str(w.message) for w in seen if issubclass(w.category, SceneWarning)]
+    assert any("objects[a].radius: 4 m is large for a mug; centimetres? 4 cm is 0.04 m" in s
+               for s in said), said
+    assert "bounds.radius" in str(e.value) and "does not fit its object" in str(e.value)
+    assert "the object's radius is 4 m: if the scene is in centimetres, that is 0.04 m" \
+        in str(e.value)
+
+
+@pytest.mark.parametrize("value,hint", [
+    (40, "a unit slip? 40 cm is 0.4 m, 40 mm is 0.04 m"),
+    (250, "a unit slip? 250 mm is 0.25 m"),
+    (20000, None)])
+def test_a_size_past_its_limit_names_the_unit_that_fits(tmp_path, value, hint):
+    path = write_scene(tmp_path, CM_SCENE.replace("radius = 4\n", f"radius = {value}\n", 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(InputError, match=r"objects\[a\]\.radius: must be > 0 and at "
+                           r"most 10 m") as e:
+            load_scene(path)
+    if hint:
+        assert hint in str(e.value)
+    else:
+        assert "unit slip" not in str(e.value)
+
+
+def test_bounds_a_hundred_times_apart_name_the_unit(tmp_path):
+    text = CM_SCENE.replace("position = [0, -45, 0]", "position = [0, -0.45, 0]") \
+        .replace("radius = 4\nheight = 10", "radius = 0.04\nheight = 0.1") \
+        + "[tasks.bounds]\nradius = [5.0, 0.04]\n"
+    with pytest.raises(InputError) as e:
+        load_scene(write_scene(tmp_path, text))
+    assert "min is 125 times init: a unit slip (100x, centimetres for metres)" in str(e.value)
