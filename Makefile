@@ -18,7 +18,7 @@ demo: $(BIN)/shacc
 test: $(BIN)/shacc
 	$(BIN)/ruff check .
 	$(BIN)/mypy  # the three packages, as pyproject's [tool.mypy] says
-	$(BIN)/python -m pytest -q -n 2  # two processes: CI has two cores
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=25  # two processes (CI has two cores), a file each: its module fixtures run once
 
 bench: $(BIN)/shacc
 	$(BIN)/python benchmarks/bench_precompute.py

@@ -16,6 +16,7 @@ a library user who never calls it traces as usual.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 from collections.abc import Callable
 from pathlib import Path
@@ -48,6 +49,23 @@ def forget_loaded() -> None:
     """Drop the programs deserialised by this process (the next call reads the folder
     again, as a new process would)."""
     _LOADED.clear()
+
+
+def release_compiled() -> None:
+    """Free the machine code of every program this process compiled or loaded: the
+    deserialised programs and JAX's in-memory caches (``jax.clear_caches``). The next
+    evaluation of a shape loads its program again from the compilation cache (or
+    compiles it, with the cache off).
+
+    A process that compiles many programs needs this now and then: each CPU program
+    maps its code into the process in many small regions (about 800 for an
+    evaluation), and Linux allows 65 530 per process (``vm.max_map_count``). Past it,
+    the next compilation fails inside XLA with a segmentation fault. The test suite
+    releases after every module; a notebook that sweeps hundreds of settings in one
+    kernel can call it between them."""
+    _LOADED.clear()
+    jax.clear_caches()
+    gc.collect()
 
 
 def _source_hash() -> str:

@@ -55,6 +55,18 @@ def pytest_unconfigure(config):
         shutil.rmtree(_COMPILED, ignore_errors=True)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """Every module's compiled programs are freed after it: a worker process that kept
+    the suite's programs would pass Linux's limit of memory maps per process and
+    crash inside XLA's compiler (``shacc_jax.program_cache.release_compiled``). A later
+    module that needs one again loads it from the run's compilation cache."""
+    yield
+    from shacc_jax import program_cache
+
+    program_cache.release_compiled()
+
+
 settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)
 settings.load_profile("shacc")
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -180,7 +181,8 @@ def test_a_read_only_folder_is_one_line(tmp_path):
 # --- Ctrl-C -------------------------------------------------------------------------
 
 CTRL_C = {
-    # command, seconds before Ctrl-C (imports; start-up; a cold compilation; the run)
+    # command, seconds from its Ctrl-C handling's install to Ctrl-C (imports of the
+    # command line; start-up; a cold compilation; the run)
     "precompute": (["precompute", SCENE, "--json", "{tmp}/out.json"], (0.06, 0.1)),
     "evaluate": (["evaluate", SCENE, "--json", "{tmp}/out.json"], (0.3, 2.0, 4.0)),
     "optimize": (["optimize", SCENE, "--json", "{tmp}/out.json"], (3.0,)),
@@ -236,6 +238,25 @@ def test_ctrl_c_while_the_file_writer_is_half_imported():
     assert res.stdout == ""
 
 
+def wait_until_ctrl_c_is_handled(pid: int, timeout: float = 60.0) -> None:
+    """Until the process has installed its Ctrl-C handling (``interrupt.install``
+    blocks SIGINT in its main thread: bit SIGINT of SigBlk in /proc). Before that the
+    interpreter is starting, where nothing is promised (README, "Ctrl-C"); on a loaded
+    machine that took longer than the 0.06 s this test once waited in total."""
+    bit = 1 << (signal.SIGINT - 1)
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        try:
+            status = Path(f"/proc/{pid}/status").read_text()
+        except OSError:
+            return  # it has ended; the test's checks say how
+        blocked = re.search(r"^SigBlk:\s*([0-9a-f]+)", status, re.M)
+        if blocked and int(blocked.group(1), 16) & bit:
+            return
+        time.sleep(0.002)
+    raise AssertionError(f"process {pid} did not install its Ctrl-C handling in {timeout} s")
+
+
 @pytest.mark.parametrize("name,moment", [(n, t) for n, (_, ts) in CTRL_C.items() for t in ts])
 def test_ctrl_c_at_any_moment(tmp_path, name, moment):
     """Exactly `interrupted`, status 130, no crash, no output, no process left."""
@@ -246,6 +267,7 @@ def test_ctrl_c_at_any_moment(tmp_path, name, moment):
     env = {**os.environ, "SHACC_COMPILE_CACHE": "off", "XDG_CACHE_HOME": str(tmp_path / "c")}
     proc = subprocess.Popen([SHACC, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env, start_new_session=True)
+    wait_until_ctrl_c_is_handled(proc.pid)
     time.sleep(moment)
     os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C reaches the whole group
     _, err = proc.communicate(timeout=120)

@@ -3,6 +3,8 @@ damaged entry, and keys on shapes (a new shape is a new entry)."""
 
 from __future__ import annotations
 
+import os
+
 import jax
 import numpy as np
 
@@ -104,3 +106,32 @@ def test_the_python_api_keeps_its_programs_too(tmp_path):
     compiled = tmp_path / "home" / "shacc" / "compiled"
     assert list(compiled.glob("programs/export-*.bin"))
     assert list(compiled.glob("xla/*-sealed"))
+
+
+def _memory_maps() -> int:
+    with open(f"/proc/{os.getpid()}/maps") as f:
+        return sum(1 for _ in f)
+
+
+def test_released_programs_give_back_their_memory_maps(shipped_results):
+    """Each compiled program maps its code into the process in many regions; a process
+    that kept every program crashed in XLA's compiler once it passed the kernel's limit
+    (vm.max_map_count). release_compiled gives the regions back, and the evaluation
+    after it is the same."""
+    from geometry_precompute import bake
+
+    release_compiled = program_cache.release_compiled
+    release_compiled()
+    before = _memory_maps()
+    first = evaluate(bake(shipped_results[:1]))
+    held = _memory_maps()
+    assert held - before > 100  # the program's code, held by JAX's caches
+    released = []
+    for _ in range(3):  # compiled (or loaded) and released again: nothing accumulates
+        release_compiled()
+        released.append(_memory_maps())
+        again = evaluate(bake(shipped_results[:1]))
+        for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(again), strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert released[0] - before < (held - before) / 2
+    assert max(released) - min(released) < 60, released

@@ -85,6 +85,19 @@ def _bake(results, overrides):
     return bake([replace(r, settings=r.settings.with_overrides(overrides)) for r in results])
 
 
+def test_carrying_user_models_a_scene_does_not_use_changes_nothing(scenes):
+    """A program that carries the joystick's state and the change of mind's (because
+    some other scene of its batch needs them) gives a scene whose user has neither the
+    same rollouts, bit for bit: batches that mix users (the reproduction's robustness
+    section evaluates every level in one) answer as a batch per user would."""
+    baked = _bake(scenes[:2], USERS["wander"])
+    alone = _evaluate(baked)
+    carried = _evaluate(baked, joystick=True, switching=True)
+    for name in alone.rollouts._fields:
+        a, b = getattr(alone.rollouts, name), getattr(carried.rollouts, name)
+        assert np.array_equal(a, b, equal_nan=True), name
+
+
 def test_the_perfect_user_stepped_is_the_closed_form(scenes):
     """A perfect user's lanes take the closed form's sample positions: stepping them
     changes no bit of a real task's outcome, activated task, step or meta steps, in any

@@ -126,22 +126,34 @@ def run(results: list[PrecomputeResult], found: Search, modes: Sequence[str],
     parameter's perfect value beside the WITH settings."""
     levels = QUICK_LEVELS if quick else LEVELS
     max_tasks = max(len(r.spaces) for r in results)
+    # Every (parameter, level) evaluated, as copies of the scenes in one batch: one
+    # program serves them all (the layout carries every user model some copy needs;
+    # each copy's settings are data), where a batch per level compiled a program each
+    # (the first evaluation of the quick reproduction spent most of its time there).
+    # A scene's rollouts do not depend on the batch it is in (docs/DECISIONS.md).
+    cases = [(param, value) for param, values in levels.items()
+             for value in ([PERFECT[param]] if param in WITH else []) + list(values)]
+    if progress is not None:
+        progress(f"  {len(cases)} users x {len(results)} scenes in one batch: "
+                 + ", ".join(f"{p} = {v}" for p, v in cases))
+    users = [replace(r, settings=r.settings.with_overrides({**WITH.get(param, {}),
+                                                            param: value}))
+             for param, value in cases for r in results]
+    tiled = None if found is None else Search(*[
+        np.concatenate([np.asarray(f)] * len(cases)) for f in found])
+    me = evaluate_results(users, modes, max_tasks=max_tasks, found=tiled).evaluation.metrics
+    S = len(results)
+    u_all = np.asarray(me.u_scene).reshape(len(cases), S, -1)
+    dr_all = np.asarray(me.delta_R_mean).reshape(len(cases), S, -1)
     out: dict[str, Any] = {}
-    for param, values in levels.items():
+    for param in levels:
         # A parameter that only means something beside another (WITH) starts from that
         # other alone, so that its first row is what its levels are compared with.
-        first = [] if param in WITH else [
+        rows = [] if param in WITH else [
             level_row(PERFECT[param], perfect_u, perfect_delta_r, modes, n_boot, seed)]
-        rows = first
-        for value in ([PERFECT[param]] if param in WITH else []) + list(values):
-            if progress is not None:
-                progress(f"  {param} = {value}")
-            user = [replace(r, settings=r.settings.with_overrides(
-                {**WITH.get(param, {}), param: value})) for r in results]
-            me = evaluate_results(user, modes, max_tasks=max_tasks,
-                                  found=found).evaluation.metrics
-            rows.append(level_row(value, np.asarray(me.u_scene), np.asarray(me.delta_R_mean),
-                                  modes, n_boot, seed))
+        for c, (name, value) in enumerate(cases):
+            if name == param:
+                rows.append(level_row(value, u_all[c], dr_all[c], modes, n_boot, seed))
         out[param] = {"rows": rows,
                       "verdict": {m: verdict(rows, m) for m in modes if m != "baseline"},
                       "sentence": sentence(param, rows)}
