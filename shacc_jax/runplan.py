@@ -74,6 +74,10 @@ BYTES_PER_ROLLOUT = {("accelerator", False, False): 600, ("accelerator", True, F
                      ("accelerator", False, True): 600, ("accelerator", True, True): 800,
                      ("cpu", False, True): 400, ("cpu", True, True): 700}
 ENV = "SHACC_MEMORY_BUDGET"
+# The stepped users on a CPU run on all its devices from this many rollouts (scenes x
+# starts x tasks x modes x points) up; below it the program compiled for a second
+# device costs more than the run it shares (docs/DECISIONS.md, issue 53).
+CPU_SPLIT_ROLLOUTS = 500_000
 MAX_BUDGET = 2**60  # bytes: an exbibyte, beyond any machine
 _GEOMETRY_FIELDS = tuple(f.name for f in GEOMETRY)
 _PARAM_FIELDS = tuple(f.name for f in PARAMS)
@@ -269,9 +273,14 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     if devices is None:
         # An accelerator's devices each add their own compute. A CPU's devices
         # (jax_num_cpu_devices, split_cpu) share its cores: the closed form keeps them
-        # busy from one device; the stepped users' loop does not, and runs on all.
+        # busy from one device; the stepped users' loop does not, and runs on all when
+        # the batch is large enough to pay for a program per device (each device
+        # compiles its own: 10-23 s each on 2 cores).
         local = jax.local_devices()
-        devices = local[:1] if backend == "cpu" and not layout.stepped_users else local
+        rollouts = S * N * T * len(modes) * (P or 1)
+        one = backend == "cpu" and (not layout.stepped_users
+                                    or rollouts < CPU_SPLIT_ROLLOUTS)
+        devices = local[:1] if one else local
     devices = list(devices)
     per_start = (bytes_per_rollout(layout.collision_checks, backend, layout.stepped_users)
                  * S * T * len(modes) * (P or 1))

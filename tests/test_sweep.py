@@ -351,10 +351,18 @@ def test_evaluation_spread_over_two_cpu_devices(shipped_bake):
 
     assert len(jax.local_devices()) == 2
     assert len(shacc_jax.plan(shipped_bake).devices) == 1  # a CPU's devices share its cores
-    # Stepped users leave cores idle from one device: their plan takes every CPU device.
+    # Stepped users leave cores idle from one device: the plan of a large batch takes
+    # every CPU device; a small one stays on one (a second device's program would cost
+    # more than it saves).
     noisy = replace(shipped_bake, user_noise=np.full_like(shipped_bake.user_noise, 0.1))
     stepped = shacc_jax.plan(noisy)
-    assert stepped.layout.stepped_users and len(stepped.devices) == 2
+    assert stepped.layout.stepped_users and len(stepped.devices) == 1
+    rollouts = int(np.prod(noisy.task_mask.shape)) * noisy.starts.shape[1] * 3
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(shacc_jax.runplan, "CPU_SPLIT_ROLLOUTS", rollouts)
+        assert len(shacc_jax.plan(noisy).devices) == 2
+        mp.setattr(shacc_jax.runplan, "CPU_SPLIT_ROLLOUTS", rollouts + 1)
+        assert len(shacc_jax.plan(noisy).devices) == 1
     two = shacc_jax.plan(shipped_bake, devices=jax.local_devices())
     assert len(two.devices) == 2 and two.padded_scenes == 12
     both = shacc_jax.execute(two, shipped_bake)

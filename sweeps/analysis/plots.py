@@ -628,7 +628,7 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     combos = sorted(df["_combo"].unique())
     # The modes' points are set a little apart along x (a fiftieth of the smallest gap
     # between values), so that modes with equal means stay visible side by side.
-    numeric = pd_is_numeric(df["_x"])
+    numeric = _numeric_column(df["_x"])
     values = np.unique(df["_x"].to_numpy(float)) if numeric else np.arange(df["_x"].nunique())
     gap = float(np.diff(values).min()) if len(values) > 1 else 1.0
     for k_mode, mode in enumerate(modes):
@@ -662,7 +662,7 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     return _save(fig, path)
 
 
-def pd_is_numeric(column) -> bool:
+def _numeric_column(column) -> bool:
     """Whether every value of a column of setting values is a number."""
     return all(isinstance(v, (int, float, np.integer, np.floating)) for v in column)
 
