@@ -144,8 +144,9 @@ _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 def _unit_slip(value: float, limit: float) -> str:
     """A number past a metre limit that fits once read as centimetres or millimetres:
     the words that say so, each reading that fits (empty if none does)."""
-    if value <= limit:
+    if value <= limit or value > 1e6 * limit:  # far past any unit: no reading fits
         return ""
+    value = float(value)
     fits = [f"{value:g} {u} is {value / f:g} m" for f, u in ((100, "cm"), (1000, "mm"))
             if value / f <= limit / 10]  # well inside once converted
     return f"; a unit slip? {', '.join(fits)} (scenes are written in metres)" if fits else ""

@@ -55,16 +55,39 @@ def pytest_unconfigure(config):
         shutil.rmtree(_COMPILED, ignore_errors=True)
 
 
+# A test process's memory maps past which its programs are released (Linux allows
+# 65 530; one test compiles at most a few programs of about 800 each).
+MAPS_TO_RELEASE = 30_000
+
+
+def _memory_maps() -> int:
+    try:
+        with open(f"/proc/{os.getpid()}/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux: no such limit to keep under
+        return 0
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
-    """Every module's compiled programs are freed after it: a worker process that kept
-    the suite's programs would pass Linux's limit of memory maps per process and
-    crash inside XLA's compiler (``shacc_jax.program_cache.release_compiled``). A later
-    module that needs one again loads it from the run's compilation cache."""
+    """Every module's compiled programs are freed after it, and within a module once
+    the process holds MAPS_TO_RELEASE memory maps: a worker process that kept the
+    suite's programs passed Linux's limit of maps per process and crashed inside XLA's
+    compiler (``shacc_jax.program_cache.release_compiled``). A later test that needs
+    a program again loads it from the run's compilation cache."""
     yield
     from shacc_jax import program_cache
 
     program_cache.release_compiled()
+
+
+@pytest.fixture(autouse=True)
+def _release_when_maps_are_many():
+    yield
+    if _memory_maps() > MAPS_TO_RELEASE:
+        from shacc_jax import program_cache
+
+        program_cache.release_compiled()
 
 
 settings.register_profile("shacc", deadline=None, max_examples=40, derandomize=True)

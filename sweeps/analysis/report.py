@@ -138,8 +138,11 @@ def _headline(per_scene: dict[str, np.ndarray], modes: list[str], n_boot: int,
         name_b = MODE_NAMES.get(b, b)
         name_b = name_b[0].upper() + name_b[1:]
         if not d.get("ci"):
-            verdict = "one scene: no interval, so no verdict"
-        elif d["ci"][0] > 0:
+            lines.append(f"{name_b} against {MODE_NAMES[a]}: success {_ci(d, 3, True)} "
+                         f"(paired; {'one scene' if d['n'] == 1 else 'no scene with both'}: no "
+                         "interval, so no verdict).")
+            continue
+        if d["ci"][0] > 0:
             verdict = f"better than {MODE_NAMES[a]}"
         elif d["ci"][1] < 0:
             verdict = f"worse than {MODE_NAMES[a]}"
