@@ -19,7 +19,7 @@ import numpy as np
 from .bodies import inside_object
 from .errors import InputError
 from .fileio import read_toml
-from .scene import Scene, SceneWarning, parse_scene
+from .scene import Scene, SceneWarning, large_sizes, parse_scene
 from .templates import resolve_tasks
 
 
@@ -98,7 +98,6 @@ def scene_from_dict(data, source: str = "<scene>") -> Scene:
 
 
 # Legal values that are almost certainly a unit mistake (a warning names the field).
-CM_SIZE = 1.0       # m: an object radius, height or half extent above this looks like cm
 CM_POSITION = 5.0   # m: a position coordinate further out looks like cm (or mm)
 
 
@@ -114,13 +113,9 @@ def _warn_units(scene: Scene) -> None:
             warn(f"{where}.yaw", f"{o.yaw:g} rad is more than a full turn; if degrees were "
                  f"meant, that is yaw = {math.radians(o.yaw):.4f} (or write yaw_deg = "
                  f"{o.yaw:g})")
-        sizes = {"radius": o.radius, "height": o.height}
-        if o.half_extents is not None:
-            sizes = {f"half_extents[{i}]": v for i, v in enumerate(o.half_extents)}
-        for name, v in sizes.items():
-            if v is not None and v > CM_SIZE:
-                warn(f"{where}.{name}", f"{v:g} m is large for a {o.kind}; centimetres? "
-                     f"{v:g} cm is {v / 100:g} m")
+        for name, v in large_sizes(o).items():
+            warn(f"{where}.{name}", f"{v:g} m is large for a {o.kind}; centimetres? "
+                 f"{v:g} cm is {v / 100:g} m")
         far = [i for i, v in enumerate(o.position) if abs(v) > CM_POSITION]
         if far:
             warn(f"{where}.position", f"{list(o.position)} m is more than {CM_POSITION:g} m "

@@ -141,6 +141,17 @@ DEG_FIELDS = {"yaw_deg": "yaw", "half_angle_deg": "half_angle"}
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
 
 
+CM_SIZE = 1.0       # m: an object radius, height or half extent above this looks like cm
+
+
+def large_sizes(o: SceneObject) -> dict[str, float]:
+    """An object's sizes (field name -> m) above ``CM_SIZE``: a scene in centimetres."""
+    sizes = {"radius": o.radius, "height": o.height}
+    if o.half_extents is not None:
+        sizes = {f"half_extents[{i}]": v for i, v in enumerate(o.half_extents)}
+    return {n: v for n, v in sizes.items() if v is not None and v > CM_SIZE}
+
+
 def _unit_slip(value: float, limit: float) -> str:
     """A number past a metre limit that fits once read as centimetres or millimetres:
     the words that say so, each reading that fits (empty if none does)."""

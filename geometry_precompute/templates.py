@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import InputError
 from .frames import IDENTITY, quat_of_approach, quat_of_rotation, yaw_matrix
-from .scene import Scene, SceneObject, Task, ratio_slip
+from .scene import Scene, SceneObject, Task, large_sizes, ratio_slip
 from .settings import Settings
 from .shapes import Shape
 from .template_files import SHAPE_DIMS, Template, namespace, object_measures
@@ -188,12 +188,9 @@ def _unit_hint(obj, lo: float, hi: float) -> str:
     centimetres or millimetres: the words that say so (empty otherwise). The object's
     own sizes above a metre say it; so does a bound 30 to 3 000 times the other, the
     factor a unit slip makes."""
-    sizes = {"radius": obj.radius, "height": obj.height}
-    if obj.half_extents is not None:
-        sizes = {"half extent": max(obj.half_extents)}
-    big = [(n, v) for n, v in sizes.items() if v is not None and v > 1.0]
+    big = large_sizes(obj)
     if big:
-        name, v = big[0]
+        name, v = next(iter(big.items()))
         return (f"; the object's {name} is {v:g} m: if the scene is in centimetres, that is "
                 f"{v / 100:g} m (scenes are written in metres)")
     return ratio_slip(lo, hi)

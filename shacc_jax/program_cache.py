@@ -61,8 +61,8 @@ def release_compiled() -> None:
     maps its code into the process in many small regions (about 800 for an
     evaluation), and Linux allows 65 530 per process (``vm.max_map_count``). Past it,
     the next compilation fails inside XLA with a segmentation fault. The test suite
-    releases after every module; a notebook that sweeps hundreds of settings in one
-    kernel can call it between them."""
+    releases after every module, and after any test that leaves 30 000 maps; a
+    notebook that sweeps hundreds of settings in one kernel can call it between them."""
     _LOADED.clear()
     jax.clear_caches()
     gc.collect()

@@ -60,7 +60,8 @@ def pytest_unconfigure(config):
 MAPS_TO_RELEASE = 30_000
 
 
-def _memory_maps() -> int:
+def memory_maps() -> int:
+    """This process's memory maps (0 where /proc has none)."""
     try:
         with open(f"/proc/{os.getpid()}/maps", "rb") as f:
             return sum(1 for _ in f)
@@ -84,7 +85,7 @@ def _release_compiled_programs():
 @pytest.fixture(autouse=True)
 def _release_when_maps_are_many():
     yield
-    if _memory_maps() > MAPS_TO_RELEASE:
+    if memory_maps() > MAPS_TO_RELEASE:
         from shacc_jax import program_cache
 
         program_cache.release_compiled()

@@ -3,10 +3,9 @@ damaged entry, and keys on shapes (a new shape is a new entry)."""
 
 from __future__ import annotations
 
-import os
-
 import jax
 import numpy as np
+from conftest import memory_maps
 
 import shacc_jax
 from shacc_jax import program_cache
@@ -108,11 +107,6 @@ def test_the_python_api_keeps_its_programs_too(tmp_path):
     assert list(compiled.glob("xla/*-sealed"))
 
 
-def _memory_maps() -> int:
-    with open(f"/proc/{os.getpid()}/maps") as f:
-        return sum(1 for _ in f)
-
-
 def test_released_programs_give_back_their_memory_maps(shipped_results):
     """Each compiled program maps its code into the process in many regions; a process
     that kept every program crashed in XLA's compiler once it passed the kernel's limit
@@ -122,14 +116,14 @@ def test_released_programs_give_back_their_memory_maps(shipped_results):
 
     release_compiled = program_cache.release_compiled
     release_compiled()
-    before = _memory_maps()
+    before = memory_maps()
     first = evaluate(bake(shipped_results[:1]))
-    held = _memory_maps()
+    held = memory_maps()
     assert held - before > 100  # the program's code, held by JAX's caches
     released = []
     for _ in range(3):  # compiled (or loaded) and released again: nothing accumulates
         release_compiled()
-        released.append(_memory_maps())
+        released.append(memory_maps())
         again = evaluate(bake(shipped_results[:1]))
         for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(again), strict=True):
             np.testing.assert_array_equal(a, b)

@@ -629,7 +629,7 @@ def sweep_lines(scenes_df, axis: str, metric: str, modes: Sequence[str], path=No
     # The modes' points are set a little apart along x (a fiftieth of the smallest gap
     # between values), so that modes with equal means stay visible side by side.
     numeric = _numeric_column(df["_x"])
-    values = np.unique(df["_x"].to_numpy(float)) if numeric else np.arange(df["_x"].nunique())
+    values = np.unique(df["_x"].to_numpy(float)) if numeric else np.zeros(1)
     gap = float(np.diff(values).min()) if len(values) > 1 else 1.0
     for k_mode, mode in enumerate(modes):
         shift = (k_mode - (len(modes) - 1) / 2) * gap / 50
