@@ -97,6 +97,9 @@ class BakedScenes:
     user_switch_at: np.ndarray
     user_aim_object: np.ndarray
     activation_swept: np.ndarray
+    intent_beta: np.ndarray
+    blend_threshold: np.ndarray
+    ho_gain: np.ndarray
     gripper_finger_length: np.ndarray
     gripper_finger_radius: np.ndarray
     gripper_opening: np.ndarray

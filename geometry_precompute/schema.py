@@ -32,7 +32,13 @@ MODES = ("baseline", "shrinking", "shacc")
 # The fourth mode: shacc's rules on the spaces the search found; it needs the search
 # first (shacc_jax.optimize), so ``shacc_jax.evaluate`` computes MODES only.
 OPTIMIZED = "optimized"
-ALL_MODES = (*MODES, OPTIMIZED)
+# Assistance that infers intent (reference/model, "Intent inference"), computed only when
+# asked for: policy blending on the initial spaces, hindsight optimization on them, and
+# hindsight optimization with Shrinking's spaces and the meta skill. Always stepped.
+INTENT_MODES = ("blend", "ho", "shacc_ho")
+# The paper's four, what reproduce and optimize evaluate.
+PAPER_MODES = (*MODES, OPTIMIZED)
+ALL_MODES = (*PAPER_MODES, *INTENT_MODES)
 OUTCOMES = ("success", "wrong", "ambiguous", "timeout", "collision")
 SUCCESS, WRONG, AMBIGUOUS, TIMEOUT, COLLISION = range(5)
 # The kinds of assistance a step is taken under (the pilot study's, reference/model): no
@@ -223,7 +229,7 @@ class Layout:
     """The static side of a batch: everything that decides the compiled program.
 
     ``n_tasks``, ``n_starts``, ``n_objects``: padded sizes (T, N, O). ``modes``: which
-    of MODES, in output order. ``meta_formula``: "yaw" when every scene's cluster
+    of MODES and INTENT_MODES, in output order. ``meta_formula``: "yaw" when every scene's cluster
     members have horizontal approach frames (Geometry.yaw_meta), "general" when no
     scene's have, "both" otherwise (each kind of lane gets its own pass).
     ``collision_checks``: whether the program checks gripper collisions (some scene's
@@ -268,9 +274,11 @@ class Layout:
     def __post_init__(self):
         modes = tuple(self.modes)
         object.__setattr__(self, "modes", modes)
-        bad = [m for m in modes if m not in MODES]
+        allowed = (*MODES, *INTENT_MODES)
+        bad = [m for m in modes if m not in allowed]
         if bad or not modes or len(set(modes)) != len(modes):
-            raise ValueError(f"Layout.modes must be distinct names from {MODES}, got {modes}")
+            raise ValueError(f"Layout.modes must be distinct names from {allowed}, got "
+                             f"{modes}")
         if self.meta_formula not in META_FORMULAS:
             raise ValueError(f"Layout.meta_formula must be one of {META_FORMULAS}, got "
                              f"{self.meta_formula!r}")

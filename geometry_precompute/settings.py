@@ -175,6 +175,14 @@ _SPECS: list[SettingSpec] = [
     _spec("activation_check", "steps", "choice", "rollout", _choice("steps", "swept"),
           ("steps", "swept"),
           param=Param("activation_swept", "bool", lambda v: v == "swept", stepped=True)),
+    # Assistance that infers intent (reference/model, "Intent inference"): the modes
+    # blend, ho and shacc_ho read these; the paper's modes do not.
+    _spec("intent_beta", 0.05, "float", "rollout", _range(0, 100, lo_open=True), unit="m",
+          param=Param("intent_beta", "float")),
+    _spec("blend_threshold", 0.4, "float", "rollout", _range(0, 1),
+          param=Param("blend_threshold", "float")),
+    _spec("ho_gain", 0.5, "float", "rollout", _range(0, 10),
+          param=Param("ho_gain", "float")),
     # The gripper of collision = "on" (reference/mujoco): two finger capsules along the
     # approach axis, ``opening`` apart (axis to axis), and a palm capsule across them.
     _spec("gripper.finger_length", 0.05, "float", "rollout", _range(0, 1, lo_open=True), unit="m",
@@ -259,6 +267,13 @@ _DOCS = {
     "user_tremor_hz": "simulated user: the tremor's frequency",
     "user_aim": "simulated user: steers at the closest point of its task's space, or at "
                 "the object (the template's aim point)",
+    "intent_beta": "intent inference: the posterior's temperature, P(task) proportional to "
+                   "exp(-(distance left to its space - that at the start) / this); larger "
+                   "is less sure",
+    "blend_threshold": "the blend mode: the confidence (best posterior minus the second) "
+                       "from which the robot assists towards the most likely task",
+    "ho_gain": "the ho and shacc_ho modes: the posterior-weighted pull towards the tasks' "
+               "spaces, in units of the step length v_max dt",
     "activation_check": "where activation is checked: at the step positions (steps, the "
                         "paper's), or along each step's segment, at its first entry into a "
                         "space (swept)",

@@ -11,6 +11,7 @@ from .runplan import Run, RunPlan, budget, execute, plan, run
 from .runtime import Runtime, configure_runtime
 from .types import (
     ALL_MODES,
+    INTENT_MODES,
     MODES,
     OPTIMIZED,
     OUTCOMES,
@@ -26,7 +27,8 @@ from .types import (
     inputs,
 )
 
-__all__ = ["ALL_MODES", "MODES", "OPTIMIZED", "OUTCOMES", "Evaluation", "Geometry", "Layout",
-           "Params", "Rollouts", "Run", "RunPlan", "Runtime", "SceneMetrics", "Search",
-           "SearchProblem", "Spaces", "budget", "clutteredness_mc", "configure_runtime",
+__all__ = ["ALL_MODES", "INTENT_MODES", "MODES", "OPTIMIZED", "OUTCOMES", "Evaluation",
+           "Geometry", "Layout", "Params", "Rollouts", "Run", "RunPlan", "Runtime",
+           "SceneMetrics", "Search", "SearchProblem", "Spaces", "budget", "clutteredness_mc",
+           "configure_runtime",
            "evaluate", "execute", "host_metrics", "inputs", "plan", "run"]

@@ -24,7 +24,7 @@ from . import body_distance as bodies
 from . import collision as col
 from . import gripper as grip
 from . import shapes
-from .assistance import MetaSpaces, meta_skill
+from .assistance import SCENE, MetaSpaces, intent_orientation, meta_skill
 from .hulls import Hulls
 from .rollout_state import Check, Lane, Move, State
 from .types import COLLISION, Geometry, Layout
@@ -60,7 +60,7 @@ def sdfs(spaces: shapes.Prepared, meta: MetaSpaces | None, p: Array,
 
 def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, track: bool,
           step: tuple[State, Move] | None = None,
-          sd: tuple[Array, Array | None] | None = None) -> Check:
+          sd: tuple[Array, Array | None] | None = None, intent: str | None = None) -> Check:
     """The full check at the gripper position p (one lane): every space's sdf and the
     activation; with ``step`` (the state before and the move), the swept check's entry
     point (traced only where ``layout.swept_checks``) and, with ``track``, the meta
@@ -68,7 +68,8 @@ def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, trac
     the gripper's capsules at (p, R before the turn) against the objects first: a
     penetration ends the rollout as a collision, without activating or turning.
     ``scene``: the lane's scene; ``sd``: the sdfs at p (:func:`sdfs`) where the caller
-    has them."""
+    has them. ``intent``: the intent mode (``assistance.intent_orientation`` turns R
+    after a step; every step is checked in full: the clearance is -inf)."""
     g, spaces = scene.geometry, scene.spaces
     x, dtype = lane.x, p.dtype
     n = am.rollout_numbers(x, dtype)
@@ -103,11 +104,19 @@ def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, trac
     code = jnp.where(hit, COLLISION, code)
     activated = jnp.where(hit, -1, activated)
     counted = jnp.zeros((), bool)
+    r_before = r
     if track:
         assert sd_init is not None and scene.meta is not None  # sdfs gives it where track
         r, counted, clear = meta_skill(g, scene.meta, p, r, sd_init, dist, done, clear, tau,
                                        n["max_angle"], layout.meta_formula, step is not None)
-    return Check(p, travelled, done, code, activated, r, counted, clear)
+    if intent is None:
+        return Check(p, travelled, done, code, activated, r, counted, clear)
+    kind = jnp.zeros((), jnp.int32)  # none: the check at the start turns nothing
+    if step is not None:
+        r, kind = intent_orientation(g, lane, p, r_before, dist, done, intent, n["max_angle"],
+                                     r if track else None, counted if track else None)
+    return Check(p, travelled, done, code, activated, r, kind == SCENE, jnp.full_like(clear,
+                 -jnp.inf), kind)
 
 
 def swept_entry(spaces, mask, lane: Lane, s: State, m: Move, p, active, sd, n):

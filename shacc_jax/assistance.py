@@ -1,8 +1,11 @@
 """The assistance a stepped rollout gets: what the robot does to the user's step and to
 the orientation. Today two policies: none (the baseline and shrinking modes: R stays
-as it is), and the meta skill (the shacc mode: inside a meta region R turns towards
-the cluster's average, section "Merging" of reference/model). The intent-inference
-policies go here.
+as it is), the meta skill (the shacc mode: inside a meta region R turns towards the
+cluster's average, section "Merging" of reference/model), and the intent-inference
+policies (reference/model, "Intent inference"): ``blend`` (policy blending with
+confidence arbitration), ``ho`` (hindsight optimization) and ``shacc_ho`` (``ho`` with
+Shrinking's spaces and the meta skill inside meta regions), each from the posterior
+over the scene's tasks (:func:`posterior`).
 
 The meta skill works on its own layout (:func:`prepare`): each scene's initial and
 optimised spaces with components first, and the members' fixed approach directions.
@@ -21,8 +24,14 @@ from jaxtyping import Array
 from . import quaternion as quat
 from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
+from .orientation import task_orientation
+from .rollout_state import Lane, Move, State
 from .trig import sincos
-from .types import Geometry
+from .types import ASSISTANCE, Geometry
+from .vec3 import V3, length, xyz
+
+NONE, SCENE, CORRECT, WRONG = (ASSISTANCE.index(k) for k in ("none", "scene", "correct",
+                                                             "wrong"))
 
 
 class MetaSpaces(NamedTuple):
@@ -81,3 +90,110 @@ def meta_skill(g: Geometry, meta: MetaSpaces, p: Array, r: Array, sd_init: Array
         r = jnp.where(done, r, turned)
         counted = inside & ~done
     return r, counted, clear
+
+
+# --- intent inference -----------------------------------------------------------------
+
+
+def posterior(v: Array, v0: Array, mask: Array, beta: Array) -> Array:
+    """The MaxEnt posterior over a scene's tasks (T,): P(j) proportional to
+    exp(-(V_j(p) - V_j(p_0)) / beta), V_j the distance left to task j's space, over
+    the real tasks (``mask``; zero for padded ones), a uniform prior. The sum runs
+    over the tasks in index order (``quaternion.ordered_sum``), so a lane's answer does
+    not depend on its batch."""
+    logit = jnp.where(mask, -(v - v0) / beta, -jnp.inf)
+    top = jnp.max(logit)
+    e = jnp.where(mask, jnp.exp(logit - top), 0.0)
+    return e / quat.ordered_sum(e, 0)
+
+
+def best_and_confidence(prob: Array, mask: Array) -> tuple[Array, Array]:
+    """(g*, the task of largest probability, the lower index on a tie; the
+    confidence, its probability less the second largest (0 for the second where the
+    scene has one task))."""
+    T = prob.shape[0]
+    index = jnp.arange(T, dtype=jnp.int32)
+    top = jnp.max(jnp.where(mask, prob, -1.0))
+    best = jnp.min(jnp.where(mask & (prob == top), index, T)).astype(jnp.int32)
+    second = jnp.max(jnp.where(mask & (index != best), prob, 0.0))
+    return best, top - second
+
+
+def _towards_each(spaces: shapes.Prepared, p: V3) -> tuple[Array, V3, Array]:
+    """At p, per task (T,): V_j = max(sdf_j, 0), the unit direction towards its space's
+    closest point (0 where p is on or in it) and that point's distance."""
+    sd = shapes.all_sdf(spaces, jnp.stack(p))
+    closest = jax.vmap(lambda sp: shapes.project_components(sp.kind, sp.center, sp.rot,
+                                                            sp.dims, sp.trig, p))(spaces)
+    d = xyz(lambda i: closest[i] - p[i])
+    dist = length(d)
+    inv = jnp.where(dist > 0, 1.0 / jnp.where(dist > 0, dist, 1.0), 0.0)
+    return jnp.maximum(sd, 0.0), xyz(lambda i: d[i] * inv), dist
+
+
+def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask: Array,
+                    mode: str) -> Move:
+    """The intent modes' position assistance on one lane's move (the user's step
+    ``m.delta`` from the gripper at s.p): with the posterior at s.p, ``blend`` takes
+    (1 - c) user + c (the step towards g*'s closest point) where the confidence c
+    reaches ``blend_threshold``, ``ho`` and ``shacc_ho`` add ``ho_gain`` v_max dt times
+    the posterior-weighted sum of the unit directions towards every task's closest
+    point; the assisted step at most v_max dt. The move's positions, path length and
+    the path since the last check follow the new step."""
+    x = lane.x
+    assert lane.v0 is not None  # the intent modes' lanes carry it
+    step_length = x.v_max * x.dt
+    v, unit, dist = _towards_each(spaces, s.p)
+    prob = posterior(v, lane.v0, mask, x.intent_beta)
+    user = m.delta
+    if mode == "blend":
+        best, conf = best_and_confidence(prob, mask)
+        on = conf >= x.blend_threshold
+        size = jnp.minimum(step_length, dist[best])
+        new = xyz(lambda i: (1.0 - conf) * user[i] + conf * size * unit[i][best])
+    else:
+        on = jnp.ones((), bool)
+        pull = xyz(lambda i: x.ho_gain * step_length * quat.ordered_sum(prob * unit[i], 0))
+        new = xyz(lambda i: user[i] + pull[i])
+    n = length(new)
+    scale = jnp.where(n > step_length, step_length / jnp.where(n > 0, n, 1.0), 1.0)
+    delta = xyz(lambda i: jnp.where(on, new[i] * scale, user[i]))
+    q = xyz(lambda i: s.q[i] + delta[i])
+    p = xyz(lambda i: m.p[i] - m.q[i] + q[i])  # the tremor rides on the commanded position
+    gap = xyz(lambda i: p[i] - s.p[i])
+    return m._replace(q=q, p=p, delta=delta, travelled=s.travelled + length(delta),
+                      moved=s.moved + length(gap))
+
+
+def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,
+                       done: Array, mode: str, max_angle: Array, meta_turned: Array | None,
+                       inside_meta: Array | None) -> tuple[Array, Array]:
+    """The intent modes' orientation assistance at the gripper p after a step (one
+    lane; ``dist``: the mode's sdfs there, masked): (R after the turn, the step's kind
+    of assistance, an index of ASSISTANCE). ``blend``: towards g*'s orientation where
+    the confidence reaches the threshold (correct where g* is the lane's task, else
+    wrong), else none. ``ho``: towards the posterior-weighted Markley average of every
+    task's orientation, always (correct where the largest weight is the lane's task).
+    ``shacc_ho``: inside a meta region the meta skill's turn (``meta_turned``,
+    ``inside_meta``: scene), elsewhere ``ho``'s. An ended step turns nothing and counts
+    as none."""
+    x = lane.x
+    assert lane.v0 is not None
+    mask = g.task_mask
+    prob = posterior(jnp.maximum(dist, 0.0), lane.v0, mask, x.intent_beta)
+    best, conf = best_and_confidence(prob, mask)
+    qs = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))(g.orient_kind, g.orient_quat,
+                                                              g.orient_axis, p)  # (T, 4)
+    if mode == "blend":
+        on = conf >= x.blend_threshold
+        goal = qs[best]
+    else:
+        on = jnp.ones((), bool)
+        goal = quat.markley_average(qs, prob)
+    kind = jnp.where(on, jnp.where(best == lane.target, CORRECT, WRONG), NONE)
+    turned = quat.turn_towards(r, goal, sincos(0.5 * max_angle))
+    r_new = jnp.where(on & ~done, turned, r)
+    if inside_meta is not None and meta_turned is not None:  # shacc_ho
+        r_new = jnp.where(inside_meta, meta_turned, r_new)
+        kind = jnp.where(inside_meta, SCENE, kind)
+    return r_new, jnp.where(done, NONE, kind).astype(jnp.int32)

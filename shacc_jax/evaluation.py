@@ -19,6 +19,7 @@ scheduler sorts the lanes of all points together, and the outputs get a leading 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import partial
 from typing import NamedTuple
 
@@ -34,7 +35,16 @@ from . import lanes as lane_scheduler
 from . import path_cull as cull
 from . import populations, stepping, tracking
 from .metrics import batch_metrics
-from .types import COLLISION, INVALID, Evaluation, Geometry, Layout, Params, Rollouts
+from .types import (
+    COLLISION,
+    INTENT_MODES,
+    INVALID,
+    Evaluation,
+    Geometry,
+    Layout,
+    Params,
+    Rollouts,
+)
 
 _TRAILING = {f.name: f.shape[1:] for f in PARAMS}  # a Params leaf's axes after S
 
@@ -329,6 +339,22 @@ def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tup
     return per_mode
 
 
+def _per_mode(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
+    """Per mode of ``layout.modes``, in order, (Outcome, R, meta steps[, assistance]):
+    every mode stepped where the users are imperfect; else the paper's modes in closed
+    form and the intent modes (whose assistance changes the path) stepped."""
+    if layout.stepped_users:
+        return _stepped(geometry, params, layout)
+    closed = tuple(m for m in layout.modes if m not in INTENT_MODES)
+    stepped = tuple(m for m in layout.modes if m in INTENT_MODES)
+    got: dict[str, tuple] = {}
+    for modes, run in ((closed, _closed_form), (stepped, _stepped)):
+        if modes:
+            got.update(zip(modes, run(geometry, params, replace(layout, modes=modes)),
+                           strict=True))
+    return [got[m] for m in layout.modes]
+
+
 @partial(jax.jit, static_argnames="layout")
 def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     """Evaluate S scenes x M modes x N starts x T tasks (M = ``layout.modes``).
@@ -360,7 +386,7 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
         geometry = jax.tree.map(lambda a: jnp.tile(a, (points,) + (1,) * (a.ndim - 1)),
                                 geometry)
         params = Params._make(a.reshape(points * S, *a.shape[2:]) for a in params)
-    per_mode = (_stepped if layout.stepped_users else _closed_form)(geometry, params, layout)
+    per_mode = _per_mode(geometry, params, layout)
     S_all, N = geometry.starts.shape[:2]
     drawn = (jax.vmap(populations.drawn_values)(geometry, params) if layout.populations else
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))

@@ -48,6 +48,9 @@ class Lane(NamedTuple):
     ou_a: Array
     ou_b: Array
     switch_steps: Array
+    # Intent inference (``assistance.posterior``): V_j(p_0), the distance from the
+    # gripper's start to each task's space (T,); None outside the intent modes.
+    v0: Array | None = None
 
 
 class Move(NamedTuple):
@@ -83,6 +86,7 @@ class Check(NamedTuple):
     r: Array
     counted: Array
     clear: Array
+    kind: Array | None = None  # the intent modes: the step's assistance (ASSISTANCE index)
 
 
 class State(NamedTuple):
@@ -107,3 +111,7 @@ class State(NamedTuple):
     clear: Array      # the clearance found at the last full check
     moved: Array      # the gripper's path since, m
     live: Array       # still stepping
+    # The intent modes: steps under assistance towards the intended task and towards
+    # another (None elsewhere: the paper's modes have neither).
+    correct: Array | None = None
+    wrong: Array | None = None

@@ -43,6 +43,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from geometry_precompute.errors import InputError
 from geometry_precompute.schema import (
+    ALL_MODES,
     GEOMETRY,
     MODES,
     OPTIMIZED,
@@ -474,10 +475,9 @@ def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         out.search.q                        # the optimized mode's parameters
     """
     modes = tuple(modes)
-    bad = [m for m in modes if m not in (*MODES, OPTIMIZED)]
+    bad = [m for m in modes if m not in ALL_MODES]
     if bad or not modes or len(set(modes)) != len(modes):
-        raise ValueError(f"modes must be distinct names from {(*MODES, OPTIMIZED)}, "
-                         f"got {modes}")
+        raise ValueError(f"modes must be distinct names from {ALL_MODES}, got {modes}")
     for b in points or ():  # a grouping error would evaluate one point on another's spaces
         for name in _GEOMETRY_FIELDS:
             if not np.array_equal(getattr(b, name), getattr(baked, name)):

@@ -28,12 +28,12 @@ from . import lanes as scheduler
 from . import quaternion as quat
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
-from .assistance import prepare
+from .assistance import CORRECT, WRONG, assist_position, prepare
 from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
 from .streams import rollout_draws, rollout_key, step_key
-from .types import Geometry, Layout, Params
+from .types import INTENT_MODES, Geometry, Layout, Params
 from .user_models import aim, is_perfect, move, shake
 from .vec3 import length, of, xyz
 
@@ -41,8 +41,9 @@ from .vec3 import length, of, xyz
 # gathering the others out); a lane that needs a full check and finds no place waits a
 # step (its rollout is unchanged by waiting). The mode with the meta skill needs a full
 # check on about 40 % of its live steps (inside a meta region R turns every step), the
-# others on about 8 %.
-FULL_CHECK_SHARE = {"meta": 4, "other": 8}
+# others on about 8 %; the intent modes' assistance reads every task each step, so they
+# check every lane every step.
+FULL_CHECK_SHARE = {"meta": 4, "other": 8, "intent": 1}
 # A refill gives at most this share of the slots new lanes; it waits until that many
 # are free (or none is live).
 REFILL_SHARE = 4
@@ -57,9 +58,11 @@ STEPPING = {"cpu": 1, "accelerator": 8}
 
 
 def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, which: str,
-               populations: bool, scene: Array, start: Array, target: Array) -> Lane:
+               populations: bool, intent: bool, scene: Array, start: Array,
+               target: Array) -> Lane:
     """One lane's constants (vmapped over a block); with ``populations``, its drawn user
-    settings."""
+    settings. With ``intent`` (an intent mode: the robot changes the step) no lane takes
+    the perfect user's straight path."""
     pick = (lambda a: a[scene])  # noqa: E731
     g, x, sp = (jax.tree.map(pick, t) for t in (geometry, params, spaces))
     dtype = geometry.starts.dtype
@@ -91,7 +94,8 @@ def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, whic
     ou_a = jnp.where(tau > 0, jnp.exp(-x.dt / jnp.where(tau > 0, tau, 1.0)), 0.0)
     ou_b = jnp.sqrt(jnp.maximum(1.0 - ou_a * ou_a, 0.0)) * x.user_noise
     switch_steps = jnp.round(x.user_mode_switch_s / x.dt)
-    return Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], is_perfect(x),
+    perfect = is_perfect(x) & (not intent)
+    return Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], perfect,
                 step_key(key), once, space(target), g.aim_point[target],
                 path.c0, path.u, path.length, decoy, space(decoy), g.aim_point[decoy],
                 ou_a.astype(dtype), ou_b.astype(dtype), switch_steps.astype(jnp.int32))
@@ -128,14 +132,19 @@ class Result(NamedTuple):
     path_length: Array
     r: Array
     meta_steps: Array
+    correct: Array | None = None
+    wrong: Array | None = None
 
 
 def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
-                 backend: str = "cpu") -> tuple[am.Outcome, Array, Array]:
+                 backend: str = "cpu") -> tuple:
     """Every rollout of one mode, stepped: the Outcome (S, N, T), R at the end (S, N,
-    T, 4) and the meta steps (S, N, T). The mode decides the spaces (the baseline's
-    initial ones, the others' optimised ones) and the assistance (the meta skill in the
-    shacc mode); the layout the checks, the slots and the scheme of the loop.
+    T, 4) and the meta steps (S, N, T); for an intent mode also the steps under each
+    kind of assistance (S, N, T, 4). The mode decides the spaces (the initial ones for
+    baseline, blend and ho, the optimised ones for the others) and the assistance (the
+    meta skill in shacc and shacc_ho, ``assistance``'s intent policies in blend, ho
+    and shacc_ho, which check every step in full); the layout the checks, the slots and
+    the scheme of the loop.
 
     One loop of steps over ``layout.lanes_per_block`` slots, each holding one rollout
     (a lane: scene, start, task). Each step moves every live lane
@@ -149,8 +158,9 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     (``lanes.run_queue``). The queue holds the real lanes sorted by the perfect user's
     landing step, longest first, so that the last rollouts, which run while slots
     empty, are short ones; padded tasks are not run."""
-    which = "init" if mode == "baseline" else "opt"
-    track = mode == "shacc"  # the meta weights reuse the check's sdfs of "opt"
+    which = "init" if mode in ("baseline", "blend", "ho") else "opt"
+    track = mode in ("shacc", "shacc_ho")  # the meta weights reuse the check's sdfs of "opt"
+    intent = mode if mode in INTENT_MODES else None
     lanes_per_block = layout.lanes_per_block or lanes_per_block_default(
         backend, stepped_users=True)
     S, N, T = geometry.starts.shape[0], geometry.starts.shape[1], geometry.task_mask.shape[1]
@@ -165,8 +175,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     # small vectors are then rows of whole arrays, which XLA vectorises across lanes.
     # The hulls are read where the gripper is near a mesh, not gathered for every lane.
     per_lane = geometry._replace(obj_hull=None, obj_hull_plane=None)  # type: ignore[arg-type]
-    make = jax.vmap(partial(_make_lane, per_lane, params, spaces, which, layout.populations),
-                    out_axes=-1)
+    make = jax.vmap(partial(_make_lane, per_lane, params, spaces, which, layout.populations,
+                            intent is not None), out_axes=-1)
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):
@@ -178,7 +188,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     order = jnp.argsort(-jax.vmap(landing)(scene, start, task)).astype(jnp.int32)
     n_real = (jnp.sum(geometry.task_mask) * N).astype(jnp.int32)
     B = min(lanes_per_block, L)
-    share, unroll = layout.stepping or (FULL_CHECK_SHARE["meta" if track else "other"],
+    share, unroll = layout.stepping or (FULL_CHECK_SHARE["intent" if intent else "meta"
+                                                         if track else "other"],
                                         STEPPING[backend if backend in STEPPING
                                                  else "accelerator"])
     F = max(1, B // share)
@@ -191,7 +202,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                          None if meta is None else jax.tree.map(pick, meta), hulls)
 
     def checked(ln, p, r, step=None, sd=None):
-        return check(scene_of(ln.scene), ln, p, r, layout, track, step, sd)
+        return check(scene_of(ln.scene), ln, p, r, layout, track, step, sd, intent)
 
     def once(tree, token):
         # On a CPU, values read by several fusions are computed once (:func:`_once`).
@@ -206,6 +217,12 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                             lane.p0 + lanes(shake)(lane, jnp.zeros(n, dtype)))
         first = lanes(checked)(lane, p_start, lane.r0)
         zero = jnp.zeros(n, dtype)
+        correct = wrong = None
+        if intent is not None:
+            # V_j(p_0), the distances from the gripper's start to every space.
+            lane = lane._replace(v0=lanes(lambda ln, p: jnp.maximum(shapes.all_sdf(
+                scene_of(ln.scene).spaces, p), 0.0))(lane, first.p))
+            correct = wrong = jnp.zeros(n, jnp.int32)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
         w0 = lanes(lambda ln: of(ln.x.user_noise * ln.once.noise0))(lane)
         mode = pause = turned = d0 = None
@@ -218,20 +235,24 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
             d0 = lanes(_distance_to_decoy)(lane, first.p)
         return lane, State(zero, of(lane.p0), of(first.p), w0, mode, pause, turned, d0,
                            lane.r0, jnp.zeros(n, jnp.int32), zero, first.done, first.code,
-                           first.activated, first.clear, zero, live)
+                           first.activated, first.clear, zero, live, correct, wrong)
 
     def finish(ln, e):
         code = jnp.where(e.done, e.code, am.TIMEOUT)
         activated = jnp.where(e.done, e.activated, -1)
         k = jnp.where(e.done, e.k, ln.x.max_steps.astype(dtype))
         return Result(code, activated, k.astype(jnp.int32), jnp.stack(e.p), e.travelled, e.r,
-                      e.meta_steps)
+                      e.meta_steps, e.correct, e.wrong)
 
     def step(s: State, lane: Lane) -> State:
         # Steps are never negative: a condition true at run time that XLA cannot fold.
         token = s.k[0] >= 0
         m = lanes(move)(lane, s, once(lanes(partial(aim, decoys=layout.switching))(lane, s),
                                       token))
+        if intent is not None:
+            m = lanes(lambda ln, st, mv: assist_position(
+                ln, st, mv, scene_of(ln.scene).spaces, per_lane.task_mask[ln.scene],
+                intent))(lane, s, m)
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
 
@@ -272,16 +293,29 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                   adv(put(m.travelled, c.travelled), s.travelled),
                   put(s.done, c.done), put(s.code, c.code), put(s.activated, c.activated),
                   put(s.clear, c.clear), adv(put(m.moved, jnp.zeros_like(c.clear)), s.moved),
-                  s.live)
+                  s.live, *counts(s, sub_s, c, put))
         steps = lane.x.max_steps.astype(dtype)
         return t._replace(live=s.live & ~(go & (t.done | (t.k >= steps))))
 
+    def counts(s, sub_s, c, put):
+        """The intent modes' counts of steps towards the lane's task and another."""
+        if intent is None:
+            return None, None
+        return (put(s.correct, sub_s.correct + (c.kind == CORRECT).astype(jnp.int32)),
+                put(s.wrong, sub_s.wrong + (c.kind == WRONG).astype(jnp.int32)))
+
+    counters = (jnp.zeros(L, jnp.int32), jnp.zeros(L, jnp.int32)) if intent else (None, None)
     result = Result(jnp.full(L, am.TIMEOUT, jnp.int32), jnp.full(L, -1, jnp.int32),
                     jnp.zeros(L, jnp.int32), jnp.zeros((L, 3), dtype), jnp.zeros(L, dtype),
-                    jnp.zeros((L, 4), dtype), jnp.zeros(L, jnp.int32))
+                    jnp.zeros((L, 4), dtype), jnp.zeros(L, jnp.int32), *counters)
     result = scheduler.run_queue(order, n_real, B, REFILL_SHARE, unroll, begin, step,
                                  finish, result)
     out = am.Outcome(result.code, result.activated, result.step, result.point,
                      result.path_length)
-    return jax.tree.map(lambda a: a.reshape(S, N, T, *a.shape[1:]),
-                        (out, result.r, result.meta_steps))
+    parts: tuple = (out, result.r, result.meta_steps)
+    if intent is not None:
+        assert result.correct is not None and result.wrong is not None
+        scene_steps, correct, wrong = result.meta_steps, result.correct, result.wrong
+        parts += (jnp.stack([result.step - scene_steps - correct - wrong, scene_steps, correct,
+                             wrong], axis=-1),)
+    return jax.tree.map(lambda a: a.reshape(S, N, T, *a.shape[1:]), parts)

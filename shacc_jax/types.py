@@ -23,6 +23,7 @@ from geometry_precompute.schema import (  # noqa: F401  (re-exported)
     AMBIGUOUS,
     ASSISTANCE,
     COLLISION,
+    INTENT_MODES,
     INVALID,
     MODES,
     OPTIMIZED,
@@ -159,6 +160,9 @@ class Params(NamedTuple):
     user_switch_at: Float[Array, "*P S"]
     user_aim_object: Bool[Array, "*P S"]
     activation_swept: Bool[Array, "*P S"]
+    intent_beta: Float[Array, "*P S"]
+    blend_threshold: Float[Array, "*P S"]
+    ho_gain: Float[Array, "*P S"]
     gripper_finger_length: Float[Array, "*P S"]
     gripper_finger_radius: Float[Array, "*P S"]
     gripper_opening: Float[Array, "*P S"]

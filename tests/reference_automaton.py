@@ -231,6 +231,9 @@ class Result:
     meta_steps: int
     path_length: float
     quat: np.ndarray  # R at the end (w, x, y, z)
+    # Steps before activation under no, scene, correct and wrong assistance (the intent
+    # modes count all four; the others' come from the meta steps).
+    assist: tuple[int, int, int, int] | None = None
 
 
 def turn_across(u, w) -> np.ndarray:
@@ -321,7 +324,8 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
     (the path length up to there, in proportion); with ``mjcf``, collisions against
     that MJCF's objects (the scene's export) instead of the baked ones."""
     T = int(baked.task_mask[scene].sum())
-    which = "init" if mode_name == "baseline" else "opt"
+    which = "init" if mode_name in ("baseline", "blend", "ho") else "opt"
+    intent = mode_name in ("blend", "ho", "shacc_ho")
 
     def spaces(w):
         return [Space(int(baked.kind[scene, j]), getattr(baked, f"center_{w}")[scene, j],
@@ -348,7 +352,28 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
         return sd, np.flatnonzero(sd <= tau)
 
     def collided(step):
-        return Result("collision", -1, step, p, np.nan, meta_steps, travelled, _wxyz(r))
+        return Result("collision", -1, step, p, np.nan, meta_steps, travelled, _wxyz(r),
+                      counts())
+
+    # Intent inference: the posterior over the tasks from V_j, the distance left to each
+    # space, against V_j at the start; its best task and confidence.
+    beta, threshold = float(baked.intent_beta[scene]), float(baked.blend_threshold[scene])
+    gain = float(baked.ho_gain[scene])
+    correct = wrong = 0
+
+    def counts():
+        return (step_count - meta_steps - correct - wrong, meta_steps, correct, wrong) \
+            if intent else None
+
+    def posterior(at):
+        v = np.array([max(s.sdf(at), 0.0) for s in active])
+        e = np.exp(-(v - v_start) / beta)
+        return e / e.sum()
+
+    def best_and_confidence(prob):
+        best = int(np.argmax(prob))
+        second = max((prob[j] for j in range(T) if j != best), default=0.0)
+        return best, prob[best] - second
 
     q = p.copy()
 
@@ -359,6 +384,8 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
         return q + user.tremor * wave * np.asarray(user.tremor_axis, float)
 
     p = gripper(0)
+    v_start = np.array([max(s.sdf(p), 0.0) for s in active])
+    step_count = 0
     # The user's state: the wandering hand, the joystick's mode and pause, the change of
     # mind (its first task, and the distance to that task's space at the start).
     if user is not None:
@@ -377,6 +404,7 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
     sd, act = check(p)
     step = 0
     while act.size == 0 and step < max_steps:
+        step_count = step
         if user is None:
             c = active[target].project(p)
             gap = np.linalg.norm(c - p)
@@ -412,7 +440,26 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
             go = gap > 0 and not still and part_len > 0
             move = unit * min(v_max * dt, part_len) if go else np.zeros(3)
             w = a * w + b * np.asarray(user.xi[step], float)
+        if intent:  # the position assistance, from the posterior at p
+            prob = posterior(p)
+            towards = []
+            for s in active:
+                d = s.project(p) - p
+                dist = float(np.linalg.norm(d))
+                towards.append((d / dist if dist > 0 else np.zeros(3), dist))
+            if mode_name == "blend":
+                best, conf = best_and_confidence(prob)
+                if conf >= threshold:
+                    unit, dist = towards[best]
+                    move = (1 - conf) * move + conf * unit * min(v_max * dt, dist)
+                    move = move * min(1.0, v_max * dt / np.linalg.norm(move)) \
+                        if np.linalg.norm(move) > 0 else move
+            else:
+                move = move + gain * v_max * dt * sum(prob[j] * towards[j][0] for j in range(T))
+                if np.linalg.norm(move) > v_max * dt:
+                    move = move * (v_max * dt / np.linalg.norm(move))
         step += 1
+        step_count = step
         q = q + move
         before, p = p, gripper(step)
         travelled += float(np.linalg.norm(move))
@@ -430,7 +477,8 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
                 act = np.flatnonzero(sd <= tau + 1e-9)
         if act.size:
             break
-        if mode_name == "shacc":
+        inside = []
+        if mode_name in ("shacc", "shacc_ho"):
             sd_init = np.array([s.sdf(p) for s in init])
             inside = [j for j in range(T) if cluster[j] >= 0 and sd_init[j] <= tau]
             if inside:
@@ -441,8 +489,23 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
                 rots = Rotation.concatenate([task_rotation(*orient[j], p) for j in members])
                 r = rotate_towards(r, rots.mean(weights=wt), omega * dt)
                 meta_steps += 1
+        if intent and not inside:  # the orientation assistance, from the posterior at p
+            prob = posterior(p)
+            best, conf = best_and_confidence(prob)
+            rots = [task_rotation(*orient[j], p) for j in range(T)]
+            if mode_name == "blend":
+                goal = rots[best] if conf >= threshold else None
+            else:
+                goal = Rotation.concatenate(rots).mean(weights=prob)
+            if goal is not None:
+                r = rotate_towards(r, goal, omega * dt)
+                if best == target:
+                    correct += 1
+                else:
+                    wrong += 1
     if act.size == 0:
-        return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled, _wxyz(r))
+        return Result("timeout", -1, max_steps, p, np.nan, meta_steps, travelled, _wxyz(r),
+                      counts())
     smallest = min(sd[j] for j in act)
     nearest = int(min(j for j in act if sd[j] <= smallest + TIE))
     if nearest_rule:
@@ -452,4 +515,4 @@ def rollout(baked, scene: int, mode_name: str, start: int, target: int,
     else:
         outcome = "wrong"
     dr = angle_between(r, task_rotation(*orient[target], p)) if outcome == "success" else np.nan
-    return Result(outcome, nearest, step, p, dr, meta_steps, travelled, _wxyz(r))
+    return Result(outcome, nearest, step, p, dr, meta_steps, travelled, _wxyz(r), counts())

@@ -27,7 +27,7 @@ def test_every_spec_name_present():
              "optimize_validation_seed", "optimize_candidates", "optimize_selection",
              "user_noise", "user_noise_tau", "user_tremor", "user_tremor_hz", "user_input",
              "user_mode_switch_s", "user_switch", "user_switch_at", "user_aim",
-             "activation_check"}
+             "activation_check", "intent_beta", "blend_threshold", "ho_gain"}
     assert set(SPECS) == names
     assert DEFAULTS["dt"] == 0.02 and DEFAULTS["start_grid"] == (6, 6)
     assert (DEFAULTS["optimize_starts"], DEFAULTS["optimize_seed"],

@@ -21,9 +21,11 @@ from matplotlib.transforms import Bbox
 from scipy.spatial import ConvexHull
 
 MODE_COLORS = {"baseline": "#7f7f7f", "shrinking": "#1f77b4", "shacc": "#2ca02c",
-               "optimized": "#9467bd"}
+               "optimized": "#9467bd", "blend": "#ff7f0e", "ho": "#d62728",
+               "shacc_ho": "#17becf"}
 # A marker per mode as well as a colour: lines that coincide stay told apart.
-MODE_MARKERS = {"baseline": "s", "shrinking": "^", "shacc": "o", "optimized": "D"}
+MODE_MARKERS = {"baseline": "s", "shrinking": "^", "shacc": "o", "optimized": "D",
+                "blend": "v", "ho": "P", "shacc_ho": "X"}
 OUTCOME_COLORS = ["#2ca02c", "#d62728", "#ff7f0e", "#9467bd", "#8c564b"]  # success..collision
 
 __all__ = ["MODE_COLORS", "MODE_MARKERS", "OUTCOME_COLORS", "assistance_bars",

@@ -34,7 +34,7 @@ from sweeps.pipeline import evaluate_results
 
 OPTIMIZED_RGBA = "0.58 0.40 0.74 0.35"  # the top view's purple
 SPACES_FOR_MODE = {"baseline": "init", "shrinking": "both", "shacc": "both",
-                   "optimized": "both"}
+                   "optimized": "both", "blend": "init", "ho": "init", "shacc_ho": "both"}
 
 
 def render_array(result, width: int, height: int, spaces: str = "both",

@@ -12,8 +12,8 @@ from __future__ import annotations
 import json
 import time
 
+from geometry_precompute.schema import PAPER_MODES
 from shacc_jax.optimize import winner_name
-from shacc_jax.types import ALL_MODES
 from sweeps.app.evaluate_cmd import print_table
 from sweeps.app.inputs import load_and_precompute
 from sweeps.output import announce, check_output_file, clean_json, human_output, write_output
@@ -36,7 +36,7 @@ def cmd_optimize(args) -> int:
     t0 = time.perf_counter()
     result = load_and_precompute(args.scene, args.set)
     t1 = time.perf_counter()
-    ev = evaluate_results([result], ALL_MODES)
+    ev = evaluate_results([result], PAPER_MODES)
     s = result.settings
     found = ev.searched()
     with human_output(args.json):
