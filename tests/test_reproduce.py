@@ -123,6 +123,42 @@ def test_robustness_section(quick_run):
     assert (out / "robustness.png").stat().st_size > 10_000
 
 
+def test_intent_section(quick_run):
+    """The paper's open question on the random scenes: every user and intent mode with
+    scene-level CIs; the perfect user's baseline and ShaCC are the main table's on the
+    same scenes; the shares of time sum to one; one sentence per comparison, in the
+    report, the README and the figure."""
+    from sweeps.analysis import intent
+
+    out, readme = quick_run
+    s = json.loads((out / "summary.json").read_text())
+    section = s["intent"]
+    assert section["modes"] == list(intent.MODES) and list(section["users"]) == \
+        list(intent.USERS)
+    randoms = [sc for sc in s["scenes"] if sc["set"] == "random"]
+    assert section["n_scenes"] == len(randoms) == 2
+    perfect = section["users"]["the perfect user"]["modes"]
+    for mode in ("baseline", "shacc"):
+        want = sum(sc[mode]["u_scene"] for sc in randoms) / len(randoms)
+        assert perfect[mode]["u_scene"]["mean"] == pytest.approx(want, abs=1e-6)
+    for entry in section["users"].values():
+        for e in entry["modes"].values():
+            shares = [e["assist"][k]["mean"] for k in ("none", "scene", "correct", "wrong")]
+            assert sum(shares) == pytest.approx(1.0, abs=1e-6)
+        # The paper's modes never assist towards a task; ho always does before the end.
+        assert entry["modes"]["baseline"]["assist"]["correct"]["mean"] == 0
+        assert entry["modes"]["ho"]["assist"]["none"]["mean"] < 0.1
+        assert len(entry["sentences"]) == 5  # shacc, blend, ho against the baseline; ...
+        for line in entry["sentences"]:
+            assert line in (out / "report.md").read_text()
+            assert line in readme.read_text()
+    # A change of mind: assistance that infers the goal is wrong some of the time.
+    mind = section["users"]["a change of mind in every approach"]["modes"]
+    assert mind["ho"]["assist"]["wrong"]["mean"] > 0
+    assert "## ShaCC and intent inference" in (out / "report.md").read_text()
+    assert (out / "intent_assistance.png").stat().st_size > 5_000
+
+
 def _row(level, diff, ci):
     return {"level": level, "vs_baseline": {"shacc": {"mean": diff, "ci": ci}}}
 

@@ -37,11 +37,17 @@ from sweeps.analysis.stats import group_means, mean_ci, paired_diff_ci
 
 REPORT_RESAMPLES = 2000
 PAIRS = (("baseline", "shrinking"), ("baseline", "shacc"), ("shrinking", "shacc"),
-         ("shrinking", "optimized"))
-# The comparisons the headline states (new against old), in this order.
-HEADLINE_PAIRS = (("baseline", "shacc"), ("baseline", "shrinking"), ("shrinking", "optimized"))
+         ("shrinking", "optimized"), ("baseline", "blend"), ("baseline", "ho"),
+         ("shacc", "shacc_ho"), ("ho", "shacc_ho"))
+# The comparisons the headline states (new against old), in this order: the paper's,
+# then intent inference against the baseline and ShaCC combined with it against each
+# part.
+HEADLINE_PAIRS = (("baseline", "shacc"), ("baseline", "shrinking"), ("shrinking", "optimized"),
+                  ("baseline", "blend"), ("baseline", "ho"), ("shacc", "shacc_ho"),
+                  ("ho", "shacc_ho"))
 MODE_NAMES = {"baseline": "the baseline", "shrinking": "Shrinking", "shacc": "ShaCC",
-              "optimized": "the optimized mode"}
+              "optimized": "the optimized mode", "blend": "blending",
+              "ho": "hindsight optimization", "shacc_ho": "ShaCC with hindsight optimization"}
 FIGURE_WIDTH = 760  # px: the narrowest a figure is embedded (its natural width)
 PAGE_WIDTH = 1000  # px: the text column
 FOLD_ROWS = 12  # tables longer than this are folded (<details>)
@@ -120,7 +126,7 @@ def _page(title: str, summary: str, headline: list[str], figures: list[dict],
         no_headline="Only one mode was evaluated: there is no comparison to state.")
 
 
-def _headline(per_scene: dict[str, np.ndarray], modes: list[str], n_boot: int,
+def headline_sentences(per_scene: dict[str, np.ndarray], modes: list[str], n_boot: int,
               over: str = "") -> list[str]:
     """One sentence per comparison that matters: the paired difference of success over
     scenes, its interval and what it says; first the modes' own success.
@@ -200,7 +206,7 @@ def sweep_report(folder: Path, n_boot: int = REPORT_RESAMPLES) -> str:
                + (f"; swept: {', '.join(axes)}" if axes else "") + ".")
     per_scene = {m: scenes.groupby("scene_index")[f"{m}.success"].mean().to_numpy(float)
                  for m in modes}
-    headline = _headline(per_scene, modes, n_boot,
+    headline = headline_sentences(per_scene, modes, n_boot,
                          f", averaged over {n_points} points" if n_points > 1 else "")
     figures: list[dict] = []
     # Per point and mode.
@@ -433,7 +439,7 @@ def evaluate_report(path: Path, n_boot: int = REPORT_RESAMPLES) -> str:
     wide = wide.reset_index().assign(point=0)
     summary = f"{len(lines)} scene{'s' if len(lines) != 1 else ''}; modes {', '.join(modes)}."
     complete = wide.dropna(subset=[f"{m}.success" for m in modes])
-    headline = _headline({m: complete[f"{m}.success"].to_numpy(float) for m in modes},
+    headline = headline_sentences({m: complete[f"{m}.success"].to_numpy(float) for m in modes},
                          modes, n_boot)
     means = {"all scenes": {"n_scenes": len(lines), **{
         m: {"success": mean_ci(wide[f"{m}.success"].dropna().to_numpy(float), n_boot)}

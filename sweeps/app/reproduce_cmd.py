@@ -29,7 +29,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 from tqdm import tqdm
 
-import shacc_jax
 from geometry_precompute import (
     DEFAULTS,
     InputError,
@@ -39,16 +38,17 @@ from geometry_precompute import (
 )
 from geometry_precompute.batch import precompute_scene
 from geometry_precompute.clutteredness import clutteredness
+from geometry_precompute.schema import ASSISTANCE, PAPER_MODES
 from shacc_jax.optimize import winner_name
 from shacc_jax.types import Search
-from sweeps.analysis import claims, plots, robustness
+from sweeps.analysis import claims, intent, plots, robustness
 from sweeps.analysis.stats import format_ci, mean_ci, partial_corr_ci, pearson_ci
 from sweeps.app.inputs import parse_sets
 from sweeps.distributed.cluster import connect
 from sweeps.output import check_output_dir, check_output_file, write_atomic, write_json
 from sweeps.pipeline import evaluate_results
 
-MODES = shacc_jax.ALL_MODES
+MODES = PAPER_MODES  # the paper's four; intent inference has its own section
 CATEGORIES = ("uncluttered", "cluttered", "uniform", "gaussian", "all", "cinit_pos",
               "cluttered_gaussian")
 README_BEGIN = "<!-- reproduce:begin (written by shacc reproduce --readme) -->"
@@ -199,6 +199,10 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     else:  # collision checks take the perfect user only
         robust = {}
     t_robust = time.perf_counter()
+    # The paper's open question, on its random scenes.
+    intent_section = intent.run(results[len(manual):], n_boot, seed, progress=_log) \
+        if n_random else {}
+    t_intent = time.perf_counter()
 
     _log(f"success fields on a {field_grid} x {field_grid} start grid...")
     field_idx = next(i for i, s in enumerate(scenes) if s["name"] == "mug-behind-two")
@@ -224,10 +228,11 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         "comparison": _comparison(correlation, categories),
         "partial_correlation": partial,
         "robustness": robust,
+        "intent": intent_section,
         "claims": claims.check(scenes, correlation, n_boot, seed),
         "timing_s": {"precompute": t_pre - t_start, "evaluate": t_eval - t_pre,
                      "statistics": t_stats - t_eval, "robustness": t_robust - t_stats,
-                     "success_fields": t_field - t_robust},
+                     "intent": t_intent - t_robust, "success_fields": t_field - t_intent},
         "rollouts": n_rollouts,
     }
     _log("figures and report...")
@@ -279,6 +284,9 @@ def _figures(out, summary, scenes, measures, u_base, field, grid, fr) -> None:
     plots.scene_top_view(fr, path=out / "scene_field.png")
     if summary["robustness"]:
         plots.robustness_lines(summary["robustness"], MODES, out / "robustness.png")
+    if summary["intent"]:
+        plots.assistance_bars(intent.shares(summary["intent"]), ASSISTANCE,
+                              out / "intent_assistance.png")
 
     plt.close("all")
 
@@ -471,8 +479,10 @@ def render_report(summary: dict) -> str:
         "![Fig. 6d](fig6d_delta_r.png)", "",
         "![Fig. 7](fig7_success_fields.png)", "",
         *robustness_section(summary),
+        *intent_section(summary),
         f"Time: precompute {t['precompute']:.1f} s, evaluation {t['evaluate']:.1f} s, "
         f"statistics {t['statistics']:.1f} s, robustness {t['robustness']:.1f} s, "
+        f"intent inference {t['intent']:.1f} s, "
         f"success fields {t['success_fields']:.1f} s.", "",
     ])
 
@@ -493,6 +503,25 @@ def robustness_section(summary: dict) -> list[str]:
             "otherwise.", "",
             robustness.markdown(summary["robustness"], MODES), "",
             "![Robustness](robustness.png)", ""]
+
+
+def intent_section(summary: dict) -> list[str]:
+    """The report's section on the paper's open question (empty without random
+    scenes)."""
+    if not summary["intent"]:
+        return []
+    return ["## ShaCC and intent inference", "",
+            "The paper leaves open how ShaCC combines with assistance that infers the "
+            "user's goal from the motion. On the random scenes, the baseline and ShaCC "
+            "against blending (`blend`), hindsight optimization (`ho`) and ShaCC with "
+            "hindsight optimization (`shacc_ho`), for three users. Means over scenes with "
+            "95 % bootstrap CIs; the shares of time are the steps before activation under "
+            "no assistance, the meta skill's (scene), assistance towards the intended "
+            "task (correct) and towards another (wrong); the comparisons are paired scene "
+            "by scene.", "",
+            *intent.markdown(summary["intent"]),
+            f"![Shares of time under each assistance, {intent.FIGURE_USER}]"
+            "(intent_assistance.png)", ""]
 
 
 def _readme_text(readme: Path) -> str:
@@ -525,6 +554,11 @@ def update_readme(readme: Path, out: Path, summary: dict) -> None:
         *([f"With imperfect simulated users ({rel}/report.md, \"Beyond the perfect "
            "user\"):", "", *[f"- {e['sentence']}" for e in summary["robustness"].values()],
            "", f"![Robustness]({rel}/robustness.png)", ""] if summary["robustness"] else []),
+        *([f"ShaCC and intent inference ({rel}/report.md, the section of that name):", "",
+           *[f"- {line}" for entry in summary["intent"]["users"].values()
+             for line in entry["sentences"]],
+           "", f"![Shares of time under each assistance]({rel}/intent_assistance.png)", ""]
+          if summary["intent"] else []),
         README_END])
     head, rest = text.split(README_BEGIN, 1)
     _, tail = rest.split(README_END, 1)
@@ -532,7 +566,8 @@ def update_readme(readme: Path, out: Path, summary: dict) -> None:
 
 
 # What reproduce writes into its output folder; a folder holding anything else is refused.
-REPRODUCE_FILES = ("fig*.png", "scene_field.png", "robustness.png", "report.md",
+REPRODUCE_FILES = ("fig*.png", "scene_field.png", "robustness.png", "intent_assistance.png",
+                   "report.md",
                    "summary.json", ".*.tmp")
 
 
