@@ -116,8 +116,14 @@ def _load_bake(path: str, n: int, collision: bool = False, user=None,
     from types import SimpleNamespace
 
     from geometry_precompute.population import POPULATED
+    from geometry_precompute.settings import SPECS
 
-    data = np.load(path)
+    data = dict(np.load(path))
+    # A rollout setting newer than the bake file takes its default in every scene.
+    for spec in SPECS.values():
+        if spec.param is not None and spec.param.field not in data and "task_mask" in data:
+            data[spec.param.field] = np.full(data["task_mask"].shape[0],
+                                             spec.param.encode(spec.default))
     missing = [k for k in FIELDS if k not in data]
     if missing:
         raise SystemExit(f"{path}: bake lacks {missing}; bake it again with this version")

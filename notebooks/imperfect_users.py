@@ -5,7 +5,8 @@
 # closest point of its task's space. Here the same scene is attempted from every start
 # of a grid twice, by that perfect user and by an imperfect one (a wandering hand whose
 # direction error drifts with a correlation time, a tremor, and a change of mind;
-# reference/model, "Simulated users"), in the baseline and ShaCC modes. The panels
+# reference/model, "Simulated users"), in the baseline and ShaCC modes (or any others:
+# `MODES` may add the intent-inference modes blend, ho and shacc_ho). The panels
 # colour each start by its outcome; the last figure marks the starts where the perfect
 # user succeeds and the imperfect one does not, per mode, and a table says how long
 # the successful approaches took.
@@ -18,6 +19,7 @@ TAU = 0.5       # user_noise_tau, s: its correlation time (0: white noise)
 TREMOR = 0.01   # user_tremor, m (at user_tremor_hz, 5 Hz by default)
 SWITCH = 0.2    # user_switch: the probability of heading for another task first
 SEED = 0        # the users' random numbers
+MODES = ("baseline", "shacc")  # any of shacc_jax.ALL_MODES but optimized, e.g. "shacc_ho"
 FIGURES = None  # a folder to save the figures in (imperfect_users*.png); None: show only
 
 # %%
@@ -32,6 +34,7 @@ from matplotlib.patches import Patch
 
 from geometry_precompute import load_scene, precompute, shipped_scene_paths
 from shacc_jax import OUTCOMES
+from shacc_jax.types import ASSISTANCE
 from sweeps.analysis.plots import success_fields
 from sweeps.pipeline import evaluate_results
 
@@ -41,7 +44,7 @@ perfect = precompute(scene, scene.settings(overrides={"start_grid": [GRID, GRID]
 user = {"user_noise": NOISE, "user_noise_tau": TAU, "user_tremor": TREMOR,
         "user_switch": SWITCH, "seed": SEED}
 imperfect = replace(perfect, settings=perfect.settings.with_overrides(user))
-modes = ("baseline", "shacc")
+modes = tuple(MODES)
 runs = {"perfect": evaluate_results([perfect], modes),
         "imperfect": evaluate_results([imperfect], modes)}
 T = len(perfect.spaces)
@@ -102,11 +105,15 @@ changes
 # ## How long the successful approaches took
 #
 # Per user and mode: the mean time to activation (s) and path length (m) of the
-# successes, and the share of all steps under ShaCC's meta skill.
+# successes, and the share of all steps under each kind of assistance: none, ShaCC's
+# meta skill (scene), and, in the intent-inference modes, assistance towards the
+# intended task (correct) or towards another (wrong: a change of mind is where an
+# inferred goal is wrong first).
 
 # %%
 pd.DataFrame({f"{who}, {mode}": {
     "time (s)": ev.evaluation.metrics.time_mean[0, m],
     "path (m)": ev.evaluation.metrics.path_length_mean[0, m],
-    "meta skill share": ev.evaluation.metrics.assist_fraction[0, m, 1]}
+    **{f"{kind} share": ev.evaluation.metrics.assist_fraction[0, m, k]
+       for k, kind in enumerate(ASSISTANCE)}}
     for who, ev in runs.items() for m, mode in enumerate(modes)}).T.round(3)

@@ -148,7 +148,10 @@ def test_intent_section(quick_run):
         # The paper's modes never assist towards a task; ho always does before the end.
         assert entry["modes"]["baseline"]["assist"]["correct"]["mean"] == 0
         assert entry["modes"]["ho"]["assist"]["none"]["mean"] < 0.1
-        assert len(entry["sentences"]) == 5  # shacc, blend, ho against the baseline; ...
+        # shacc, blend, ho against the baseline, shacc_ho against shacc and ho: success,
+        # then delta_R.
+        assert len(entry["sentences"]) == 10
+        assert sum("delta_R" in line for line in entry["sentences"]) == 5
         for line in entry["sentences"]:
             assert line in (out / "report.md").read_text()
             assert line in readme.read_text()

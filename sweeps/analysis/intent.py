@@ -6,8 +6,9 @@ optimization and ShaCC with hindsight optimization, by the perfect user and by t
 imperfect ones (a change of mind in every approach, the case where inference is wrong
 first; a wandering hand), all in one batch. Per user and mode: the mean over scenes of
 success, of delta_R and of the four fractions of time under each kind of assistance,
-with scene-level bootstrap CIs; and one sentence per comparison (the report's
-headline pairs) saying whether the newer mode is better, worse or not told apart.
+with scene-level bootstrap CIs; and two sentences per comparison (the report's headline
+pairs), one on success and one on delta_R, saying whether the newer mode is better,
+worse or not told apart.
 """
 
 from __future__ import annotations
@@ -20,9 +21,9 @@ import numpy as np
 
 from geometry_precompute import PrecomputeResult
 from shacc_jax.types import ASSISTANCE
-from sweeps.analysis.report import MODE_NAMES, headline_sentences
+from sweeps.analysis.report import HEADLINE_PAIRS, MODE_NAMES, headline_sentences
 from sweeps.analysis.robustness import PERFECT
-from sweeps.analysis.stats import format_ci, mean_ci
+from sweeps.analysis.stats import format_ci, mean_ci, paired_diff_ci
 from sweeps.pipeline import evaluate_results
 
 MODES = ("baseline", "shacc", "blend", "ho", "shacc_ho")
@@ -64,8 +65,25 @@ def run(results: Sequence[PrecomputeResult], n_boot: int, seed: int,
                                       for j, kind in enumerate(ASSISTANCE)}}
         said = headline_sentences({mode: u[:, m] for m, mode in enumerate(MODES)},
                                   list(MODES), n_boot, over=f", {name}")
+        said += [_delta_r_sentence(dr[:, MODES.index(a)], dr[:, MODES.index(b)], a, b,
+                                   name, n_boot, seed) for a, b in HEADLINE_PAIRS
+                 if a in MODES and b in MODES]
         out["users"][name] = {"settings": over, "modes": modes, "sentences": said[1:]}
     return out
+
+
+def _delta_r_sentence(old: np.ndarray, new: np.ndarray, a: str, b: str, user: str,
+                      n_boot: int, seed: int) -> str:
+    """One sentence on the orientation at activation: the paired difference of the
+    scenes' mean delta_R (scenes where both modes have a success), and what it says."""
+    d = paired_diff_ci(old, new, n_boot, seed)
+    name_b = MODE_NAMES[b][0].upper() + MODE_NAMES[b][1:]
+    text = f"{name_b} against {MODE_NAMES[a]}: delta_R {format_ci(d, 3)} rad"
+    if not d.get("ci"):
+        return f"{text} (paired; fewer than two scenes with successes in both, {user})."
+    verdict = ("lower" if d["ci"][1] < 0 else "higher" if d["ci"][0] > 0 else
+               f"not told apart with {d['n']} scenes")
+    return f"{text} (paired, over {d['n']} scenes, {user}): {verdict}."
 
 
 def markdown(section: dict) -> list[str]:
