@@ -45,6 +45,7 @@ from geometry_precompute.errors import InputError
 from geometry_precompute.schema import (
     ALL_MODES,
     GEOMETRY,
+    INTENT_MODES,
     MODES,
     OPTIMIZED,
     PARAMS,
@@ -129,8 +130,7 @@ class RunPlan:
             f"({', '.join(lay.modes)})",
             f"program: meta formula {lay.meta_formula}, collision checks "
             f"{'on' if lay.collision_checks else 'off'}, "
-            f"{'stepped (imperfect users)' if lay.stepped_users else 'closed-form'} "
-            f"rollouts, blocks of {lay.lanes_per_block} "
+            f"{_how(lay)} rollouts, blocks of {lay.lanes_per_block} "
             f"lanes x {lay.samples_per_block} samples",
             f"memory: {_size(self.bytes_per_piece)} per piece of a budget of "
             f"{_size(self.budget)}: {len(self.pieces)} piece(s) of "
@@ -307,6 +307,16 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
                    devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
                    padded_scenes=per_part * len(devices), fields=_fields(fields),
                    metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
+
+
+def _how(lay: Layout) -> str:
+    """How the program computes its rollouts, in words."""
+    intent = [m for m in lay.modes if m in INTENT_MODES]
+    if lay.stepped_users:
+        return "stepped (imperfect users)"
+    if intent:
+        return f"closed-form and stepped ({', '.join(intent)}: the assistance moves the user)"
+    return "closed-form"
 
 
 def _pad(a: np.ndarray, n: int, axis: int) -> np.ndarray:

@@ -197,3 +197,14 @@ def test_the_limits_where_a_mode_is_the_baseline(scenes):
     assert ro.assist[4, two, blend, :, :2, 3].sum() > 0
     assert ro.assist[4, two, shacc, :, :2, 3].sum() == 0
     assert ro.assist[4, two, shacc, :, :2, 1].sum() > 0  # its meta skill does act
+
+
+def test_the_plan_says_which_modes_are_stepped(scenes):
+    """With perfect users the paper's modes keep the closed form and the intent modes are
+    stepped, in one program; the plan says so (no compilation)."""
+    baked = bake(scenes[:1])
+    text = shacc_jax.plan(baked, ("baseline", "ho", "shacc_ho")).describe()
+    assert "closed-form and stepped (ho, shacc_ho" in text
+    assert "closed-form rollouts" in shacc_jax.plan(baked, ("baseline",)).describe()
+    with pytest.raises(ValueError, match="distinct names"):
+        shacc_jax.run(baked, ("baseline", "hindsight"))
