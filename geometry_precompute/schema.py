@@ -245,7 +245,11 @@ class Layout:
     (``user_input`` modes): only then do the lanes carry a mode and a pause.
     ``swept_checks``: whether some scene checks
     activation along each step's segment (``activation_check`` swept): only then does
-    the stepped program trace that check. ``box_objects``:
+    the stepped program trace that check. ``intent_yaw``: whether every real task of
+    every scene has a horizontal approach frame (side, handle and drawer grasps): the
+    intent modes' posterior-weighted average orientation then takes the meta skill's
+    closed form instead of the Markley average's eigenvector (the same rotation; set only
+    where the modes include an intent mode). ``box_objects``:
     whether the collision model needs box slots. ``lanes_per_block`` (None: the
     backend's default for the program, :func:`lanes_per_block_default`, which the run
     plan writes in) and ``samples_per_block``: the lane scheduler's block of lanes x
@@ -267,6 +271,7 @@ class Layout:
     switching: bool = False
     joystick: bool = False
     swept_checks: bool = False
+    intent_yaw: bool = False
     lanes_per_block: int | None = None
     samples_per_block: int = 16
     stepping: tuple[int, int] | None = None
@@ -296,6 +301,16 @@ class Layout:
                              f"{self.lanes_per_block}")
 
 
+def _every_task_yaw(arrays) -> bool:
+    """Whether every real task of the bake has a horizontal approach frame."""
+    import numpy as np
+
+    from .baking import is_horizontal_approach  # deferred: the schema stays light
+
+    mask, quats = np.asarray(arrays.task_mask), np.asarray(arrays.orient_quat)
+    return all(is_horizontal_approach(q) for q in quats[mask])
+
+
 def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
                  samples_per_block: int = 16) -> Layout:
     """:class:`Layout` of any object with the schema's
@@ -314,6 +329,7 @@ def batch_layout(arrays, modes=MODES, lanes_per_block: int | None = None,
         n_objects=arrays.obj_mask.shape[-1], modes=tuple(modes),
         meta_formula="yaw" if yaw.all() else "general" if not yaw.any() else "both",
         collision_checks=collide, box_objects=boxes, stepped_users=stepped,
+        intent_yaw=any(m in INTENT_MODES for m in modes) and _every_task_yaw(arrays),
         populations=bool((np.asarray(arrays.user_dist) > 0).any()),
         joystick=bool(np.asarray(arrays.user_input_modes).any()),
         switching=bool((np.asarray(arrays.user_switch) > 0).any()

@@ -114,7 +114,8 @@ def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, trac
     kind = jnp.zeros((), jnp.int32)  # none: the check at the start turns nothing
     if step is not None:
         r, kind = intent_orientation(g, lane, p, r_before, dist, done, intent, n["max_angle"],
-                                     r if track else None, counted if track else None)
+                                     r if track else None, counted if track else None,
+                                     layout.intent_yaw)
     return Check(p, travelled, done, code, activated, r, kind == SCENE, jnp.full_like(clear,
                  -jnp.inf), kind)
 

@@ -24,7 +24,7 @@ from jaxtyping import Array
 from . import quaternion as quat
 from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
-from .orientation import task_orientation
+from .orientation import horizontal_approach_quat, task_direction, task_orientation
 from .rollout_state import Lane, Move, State
 from .trig import sincos
 from .types import ASSISTANCE, Geometry
@@ -165,9 +165,23 @@ def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask
                       moved=s.moved + length(gap))
 
 
+def weighted_yaw_average(g: Geometry, weights: Array, p: Array) -> Array:
+    """The weighted Markley average of the tasks' orientations at p where every one is a
+    horizontal approach frame (``Layout.intent_yaw``): the approach frame of the
+    weighted sum of their unit approach directions (``meta`` module docstring); psi 0
+    where that sum vanishes."""
+    fixed = yaw_directions(g.orient_quat)[0]  # (T, 2)
+    ux, uy = task_direction(g.orient_kind, fixed.T, g.orient_axis.T, p)
+    ax, ay = quat.ordered_sum(weights * ux, 0), quat.ordered_sum(weights * uy, 0)
+    n = jnp.sqrt(ax * ax + ay * ay)
+    ok = n > jnp.finfo(n.dtype).tiny
+    inv = 1.0 / jnp.where(ok, n, 1.0)
+    return horizontal_approach_quat(jnp.where(ok, ax * inv, 1.0), jnp.where(ok, ay * inv, 0.0))
+
+
 def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,
                        done: Array, mode: str, max_angle: Array, meta_turned: Array | None,
-                       inside_meta: Array | None) -> tuple[Array, Array]:
+                       inside_meta: Array | None, yaw: bool = False) -> tuple[Array, Array]:
     """The intent modes' orientation assistance at the gripper p after a step (one
     lane; ``dist``: the mode's sdfs there, masked): (R after the turn, the step's kind
     of assistance, an index of ASSISTANCE). ``blend``: towards g*'s orientation where
@@ -176,20 +190,23 @@ def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,
     task's orientation, always (correct where the largest weight is the lane's task).
     ``shacc_ho``: inside a meta region the meta skill's turn (``meta_turned``,
     ``inside_meta``: scene), elsewhere ``ho``'s. An ended step turns nothing and counts
-    as none."""
+    as none. ``yaw``: ``Layout.intent_yaw`` (the average in closed form)."""
     x = lane.x
     assert lane.v0 is not None
     mask = g.task_mask
     prob = posterior(jnp.maximum(dist, 0.0), lane.v0, mask, x.intent_beta)
     best, conf = best_and_confidence(prob, mask)
-    qs = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))(g.orient_kind, g.orient_quat,
-                                                              g.orient_axis, p)  # (T, 4)
     if mode == "blend":
         on = conf >= x.blend_threshold
-        goal = qs[best]
+        goal = task_orientation(g.orient_kind[best], g.orient_quat[best], g.orient_axis[best], p)
     else:
         on = jnp.ones((), bool)
-        goal = quat.markley_average(qs, prob)
+        if yaw:
+            goal = weighted_yaw_average(g, prob, p)
+        else:
+            qs = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))(
+                g.orient_kind, g.orient_quat, g.orient_axis, p)  # (T, 4)
+            goal = quat.markley_average(qs, prob)
     kind = jnp.where(on, jnp.where(best == lane.target, CORRECT, WRONG), NONE)
     turned = quat.turn_towards(r, goal, sincos(0.5 * max_angle))
     r_new = jnp.where(on & ~done, turned, r)

@@ -95,6 +95,33 @@ def test_the_weighted_average_is_scipys():
         assert angle < 1e-4
 
 
+def test_the_yaw_average_is_the_markley_average():
+    """Where every task is a horizontal approach frame (Layout.intent_yaw), ho's average
+    orientation takes the closed form: the same rotation as the weighted Markley
+    average of the tasks' orientations at p, for fixed and point-to-axis tasks."""
+    from geometry_precompute.baking import is_horizontal_approach
+    from shacc_jax.orientation import horizontal_approach_quat, task_orientation
+
+    rng = np.random.default_rng(11)
+    T = 5
+    for _ in range(20):
+        psi = rng.uniform(-np.pi, np.pi, T)
+        q = np.stack([np.asarray(horizontal_approach_quat(jnp.cos(a), jnp.sin(a)))
+                      for a in psi])
+        assert all(is_horizontal_approach(v) for v in q.astype(np.float64))
+        kind = rng.integers(0, 2, T).astype(np.int32)
+        axis = rng.uniform(-0.3, 0.3, (T, 2))
+        p = rng.uniform(-0.4, 0.4, 3)
+        w = rng.dirichlet(np.ones(T))
+        g = type("G", (), {"orient_kind": jnp.asarray(kind), "orient_quat": jnp.asarray(q),
+                           "orient_axis": jnp.asarray(axis)})
+        got = np.asarray(assistance.weighted_yaw_average(g, jnp.asarray(w), jnp.asarray(p)))
+        qs = jax.vmap(task_orientation, in_axes=(0, 0, 0, None))(
+            jnp.asarray(kind), jnp.asarray(q), jnp.asarray(axis), jnp.asarray(p))
+        want = np.asarray(quat.markley_average(qs, jnp.asarray(w)))
+        assert float(np.asarray(quat.angle(jnp.asarray(got), jnp.asarray(want)))) < 1e-3
+
+
 def test_every_intent_rollout_agrees_with_the_reference(scenes):
     """Every rollout of blend, ho and shacc_ho, with the perfect user and with every
     imperfect-user parameter at once (each scene twice in one batch: one program; with the
@@ -115,7 +142,7 @@ def test_every_intent_rollout_agrees_with_the_reference(scenes):
     baked = bake(perfect + every)
     with jax.enable_x64(True):
         g, p, lay = shacc_jax.inputs(baked, modes=INTENT, dtype=np.float64)
-        assert lay.stepped_users
+        assert lay.stepped_users and lay.intent_yaw  # mugs: ho's average in closed form
         ev = jax.tree.map(np.asarray, shacc_jax.evaluate(g, p, replace(lay, lanes_per_block=40)))
         ro = ev.rollouts
         kinds = {"none": 0, "scene": 0, "correct": 0, "wrong": 0}
