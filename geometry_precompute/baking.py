@@ -36,7 +36,7 @@ from .frames import yaw_matrix
 from .mesh_objects import hull
 from .population import POPULATED, Population
 from .precomputing import PrecomputeResult
-from .schema import KIND_CODES, MAX_PARAMS, batch_layout
+from .schema import KIND_CODES, MAX_PARAMS, batch_layout, is_horizontal_approach
 from .settings import SPECS, population_range
 from .starts import optimize_start_poses, start_plane, start_poses
 from .templates import TaskSpace
@@ -195,20 +195,6 @@ def hull_rows(n: int) -> int:
         octave = 1 << (size.bit_length() - 1)
         size += octave // 4
     return size
-
-
-def is_horizontal_approach(q) -> bool:
-    """Whether orientation ``q`` is a horizontal approach frame: q = (cos psi/2, 0, 0,
-    sin psi/2) * q_forward, i.e. the x and y parts of q * conj(q_forward) vanish to 64
-    machine epsilons (float64). The JAX half's ``orientation.fixed_direction`` applies
-    the same test in its working precision; the layout's decision is this one."""
-    w, x, y, z = (float(v) for v in q)
-    fw, fx, fy, fz = 0.5, -0.5, -0.5, -0.5  # conj(q_forward), q_forward = (1, 1, 1, 1) / 2
-    rx = w * fx + x * fw + y * fz - z * fy
-    ry = w * fy - x * fz + y * fw + z * fx
-    rw = w * fw - x * fx - y * fy - z * fz
-    rz = w * fz + x * fy - y * fx + z * fw
-    return bool(abs(rx) + abs(ry) <= 64 * np.finfo(np.float64).eps and rw * rw + rz * rz > 0.5)
 
 
 def _affine_map(space: TaskSpace, source) -> tuple[np.ndarray, np.ndarray]:

@@ -22,6 +22,7 @@ apart from the state for the same reason):
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -301,11 +302,23 @@ class Layout:
                              f"{self.lanes_per_block}")
 
 
+def is_horizontal_approach(q) -> bool:
+    """Whether orientation ``q`` is a horizontal approach frame: q = (cos psi/2, 0, 0,
+    sin psi/2) * q_forward, i.e. the x and y parts of q * conj(q_forward) vanish to 64
+    machine epsilons (float64). The JAX half's ``orientation.fixed_direction`` applies
+    the same test in its working precision; the layout's decision is this one."""
+    w, x, y, z = (float(v) for v in q)
+    fw, fx, fy, fz = 0.5, -0.5, -0.5, -0.5  # conj(q_forward), q_forward = (1, 1, 1, 1) / 2
+    rx = w * fx + x * fw + y * fz - z * fy
+    ry = w * fy - x * fz + y * fw + z * fx
+    rw = w * fw - x * fx - y * fy - z * fz
+    rz = w * fz + x * fy - y * fx + z * fw
+    return bool(abs(rx) + abs(ry) <= 64 * sys.float_info.epsilon and rw * rw + rz * rz > 0.5)
+
+
 def _every_task_yaw(arrays) -> bool:
     """Whether every real task of the bake has a horizontal approach frame."""
     import numpy as np
-
-    from .baking import is_horizontal_approach  # deferred: the schema stays light
 
     mask, quats = np.asarray(arrays.task_mask), np.asarray(arrays.orient_quat)
     return all(is_horizontal_approach(q) for q in quats[mask])

@@ -99,7 +99,7 @@ def test_the_yaw_average_is_the_markley_average():
     """Where every task is a horizontal approach frame (Layout.intent_yaw), ho's average
     orientation takes the closed form: the same rotation as the weighted Markley
     average of the tasks' orientations at p, for fixed and point-to-axis tasks."""
-    from geometry_precompute.baking import is_horizontal_approach
+    from geometry_precompute.schema import is_horizontal_approach
     from shacc_jax.orientation import horizontal_approach_quat, task_orientation
 
     rng = np.random.default_rng(11)

@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from jax_layouts import meta_target, meta_target_yaw, meta_weights
 from scipy.spatial.transform import Rotation
 
-from geometry_precompute.baking import is_horizontal_approach
 from geometry_precompute.frames import frame_from_approach as cpu_frame
+from geometry_precompute.schema import is_horizontal_approach
 from shacc_jax import quaternion as quat
 from shacc_jax import trig
 from shacc_jax.meta import yaw_directions
