@@ -23,8 +23,8 @@ from jaxtyping import Array
 
 from . import quaternion as quat
 from . import shapes
-from .meta import meta_target_batch, meta_target_yaw_batch, yaw_directions
-from .orientation import horizontal_approach_quat, task_direction, task_orientation
+from .meta import meta_target_batch, meta_target_yaw_batch, yaw_average, yaw_directions
+from .orientation import task_direction, task_orientation
 from .rollout_state import Lane, Move, State
 from .trig import sincos
 from .types import ASSISTANCE, Geometry
@@ -119,16 +119,16 @@ def best_and_confidence(prob: Array, mask: Array) -> tuple[Array, Array]:
     return best, top - second
 
 
-def _towards_each(spaces: shapes.Prepared, p: V3) -> tuple[Array, V3, Array]:
-    """At p, per task (T,): V_j = max(sdf_j, 0), the unit direction towards its space's
-    closest point (0 where p is on or in it) and that point's distance."""
-    sd = shapes.all_sdf(spaces, jnp.stack(p))
+def _towards_each(spaces: shapes.Prepared, p: V3) -> tuple[V3, Array]:
+    """At p, per task (T,): the unit direction towards its space's closest point (0
+    where p is on or in it) and that point's distance, which is V_j = max(sdf_j, 0)
+    (the closest point of a space to a point inside is the point itself)."""
     closest = jax.vmap(lambda sp: shapes.project_components(sp.kind, sp.center, sp.rot,
                                                             sp.dims, sp.trig, p))(spaces)
     d = xyz(lambda i: closest[i] - p[i])
     dist = length(d)
     inv = jnp.where(dist > 0, 1.0 / jnp.where(dist > 0, dist, 1.0), 0.0)
-    return jnp.maximum(sd, 0.0), xyz(lambda i: d[i] * inv), dist
+    return xyz(lambda i: d[i] * inv), dist
 
 
 def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask: Array,
@@ -143,8 +143,8 @@ def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask
     x = lane.x
     assert lane.v0 is not None  # the intent modes' lanes carry it
     step_length = x.v_max * x.dt
-    v, unit, dist = _towards_each(spaces, s.p)
-    prob = posterior(v, lane.v0, mask, x.intent_beta)
+    unit, dist = _towards_each(spaces, s.p)
+    prob = posterior(dist, lane.v0, mask, x.intent_beta)
     user = m.delta
     if mode == "blend":
         best, conf = best_and_confidence(prob, mask)
@@ -167,16 +167,10 @@ def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask
 
 def weighted_yaw_average(g: Geometry, weights: Array, p: Array) -> Array:
     """The weighted Markley average of the tasks' orientations at p where every one is a
-    horizontal approach frame (``Layout.intent_yaw``): the approach frame of the
-    weighted sum of their unit approach directions (``meta`` module docstring); psi 0
-    where that sum vanishes."""
+    horizontal approach frame (``Layout.intent_yaw``): the meta skill's closed form
+    (``meta.yaw_average``)."""
     fixed = yaw_directions(g.orient_quat)[0]  # (T, 2)
-    ux, uy = task_direction(g.orient_kind, fixed.T, g.orient_axis.T, p)
-    ax, ay = quat.ordered_sum(weights * ux, 0), quat.ordered_sum(weights * uy, 0)
-    n = jnp.sqrt(ax * ax + ay * ay)
-    ok = n > jnp.finfo(n.dtype).tiny
-    inv = 1.0 / jnp.where(ok, n, 1.0)
-    return horizontal_approach_quat(jnp.where(ok, ax * inv, 1.0), jnp.where(ok, ay * inv, 0.0))
+    return yaw_average(weights, *task_direction(g.orient_kind, fixed.T, g.orient_axis.T, p))
 
 
 def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,

@@ -112,10 +112,17 @@ def meta_target_yaw_batch(init: shapes.Prepared, opt: shapes.Prepared, mask: Arr
     of the time on CPU. ``sd``: as for :func:`meta_target_batch`."""
     # The weights' normalisation does not change the direction of the sum.
     inside, w = _region_and_weights(init, opt, mask, cluster, p, tau, sd)
-    ux, uy = task_direction(orient_kind, fixed_dir, axis, p)
+    return inside, yaw_average(w, *task_direction(orient_kind, fixed_dir, axis, p))
+
+
+def yaw_average(w: Array, ux: Array, uy: Array) -> Array:
+    """The weighted Markley average of horizontal approach frames with approach
+    directions (ux, uy) and weights w over axis 0 (the module docstring's closed form):
+    the approach frame of the weighted sum of the directions, psi 0 where it vanishes,
+    w first non-negative. The weights need not sum to one."""
     ax, ay = quat.ordered_sum(w * ux, 0), quat.ordered_sum(w * uy, 0)
     n = jnp.sqrt(ax * ax + ay * ay)
     ok = n > jnp.finfo(n.dtype).tiny
     inv = 1.0 / jnp.where(ok, n, 1.0)
     q = horizontal_approach_quat(jnp.where(ok, ax * inv, 1.0), jnp.where(ok, ay * inv, 0.0))
-    return inside, q * jnp.where(q[:1] < 0, -1.0, 1.0)
+    return q * jnp.where(q[:1] < 0, -1.0, 1.0)
