@@ -10,17 +10,22 @@ task it is sent, so this module imports nothing from JAX (a test holds this).
 from __future__ import annotations
 
 import json
+import re
 import time
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .baking import bake
 from .cache import cached, default_folder
+from .errors import SceneWarning
 from .generate import random_scene
 from .loading import load_scene
 from .precomputing import PrecomputeResult, precompute
 from .scene import Scene
 from .settings import DEFAULTS
+
+GENERATED = re.compile(r"^<generator>: objects\[\d+\]\.\w*: ")
 
 
 @dataclass(frozen=True)
@@ -34,6 +39,8 @@ class Batch:
     cache_hits: int
     seconds: float
     cache_warning: str | None = None  # why results could not be stored, if they could not
+    # The scenes' warnings (an open mesh, one floating), "scene NAME: MESSAGE", each once.
+    scene_warnings: tuple[str, ...] = ()
 
 
 def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
@@ -49,12 +56,23 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
     folder = Path(cache) if cache else default_folder()
     settings = point_settings(points)
     got, warning = [], None
+    said: dict[str, None] = {}
     for ref in refs:
-        r, hit, why = cached(ref, settings(ref if isinstance(ref, Scene) else None, 0), folder)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", SceneWarning)
+            r, hit, why = cached(ref, settings(ref if isinstance(ref, Scene) else None, 0),
+                                 folder)
+        for w in caught:  # told by the client, one line each, not by this worker's stderr
+            if issubclass(w.category, SceneWarning):
+                # A generated scene's object index says nothing: one line per cause.
+                cause = GENERATED.sub("", str(w.message))
+                said.setdefault(f"scene {r.scene.name}: {cause}", None)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         got.append((r, hit))
         warning = warning or why
     batch = bake_batch(got, points, tasks, objects, time.perf_counter() - t0, settings)
-    return replace(batch, cache_warning=warning)
+    return replace(batch, cache_warning=warning, scene_warnings=tuple(said))
 
 
 def point_settings(points: list[dict]):

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from .mesh_objects import ORIGINS, PLACEMENT_KEYS, UPS
+from .mesh_objects import UNITS as MESH_UNITS
 from .population import MAX_VALUES, POPULATED
 from .scene import (
     DEG_FIELDS,
@@ -43,6 +45,8 @@ LOADER_ONLY = {
         "yaw and yaw_deg (half_angle and half_angle_deg) are not both given",
         "objects do not interpenetrate (checked when the geometry is built)",
         "a mesh file exists and holds a solid (read when the scene is)",
+        "a mesh's quat is not of zero norm; placed, it reaches at most 1 mm below the "
+        "table",
         "a template file exists and is valid; where a scene names template files, its "
         "tasks' templates, bounds and fixed dimensions are checked against them",
         "start_grid: n_y * n_z <= 16 777 216; start_z_range: low <= high",
@@ -162,7 +166,7 @@ def _object_schema() -> dict:
             "half_extents": {**_vector(3, size), "description": "m (boxes)"},
             "mesh": {**_text(4096), "description": "mesh objects: the mesh file (OBJ, STL, "
                      "PLY, GLB), relative to the scene file"},
-            "scale": {**size, "description": "mesh objects: metres per unit of the file"},
+            **placement_properties(),
         },
         "additionalProperties": False,
         "allOf": [
@@ -173,9 +177,35 @@ def _object_schema() -> dict:
             {"if": {"properties": {"kind": {"const": "mesh"}}},
              "then": {"required": ["mesh"],
                       "not": {"anyOf": [{"required": ["radius"]}, {"required": ["height"]}]}},
-             "else": {"not": {"anyOf": [{"required": ["mesh"]}, {"required": ["scale"]}]}}},
+             "else": {"not": {"anyOf": [{"required": [k]} for k in ("mesh", *PLACEMENT_KEYS)]}}},
+            *placement_rules(),
+            {"not": {"required": ["yaw", "yaw_deg"]}},
+            *({"not": {"required": [a, b]}} for a in ("yaw", "yaw_deg") for b in ("rpy", "quat")),
         ],
     }
+
+
+def placement_properties() -> dict:
+    """The mesh placement keys (``geometry_precompute.mesh_objects``), for scenes and a
+    generator's mesh entries."""
+    angle = _number(-1000.0, 1000.0)
+    return {
+        "up": {"enum": list(UPS), "description": "mesh objects: the file's up axis"},
+        "unit": {"enum": list(MESH_UNITS), "description": "mesh objects: the file's length "
+                 "unit (or scale)"},
+        "scale": {**_number(0, 1000.0, lo_open=True),
+                  "description": "mesh objects: metres per unit of the file"},
+        "rpy": {**_vector(3, angle), "description": "mesh objects: roll, pitch, yaw (rad)"},
+        "quat": {**_vector(4, angle), "description": "mesh objects: [w, x, y, z]"},
+        "origin": {"enum": list(ORIGINS), "description": "mesh objects: \"file\" (the "
+                   "file's origin at position) or \"base\" (the centre of its bounding box's "
+                   "lowest face)"},
+    }
+
+
+def placement_rules() -> list[dict]:
+    """unit or scale, rpy or quat: not both."""
+    return [{"not": {"required": ["unit", "scale"]}}, {"not": {"required": ["rpy", "quat"]}}]
 
 
 def scene_schema() -> dict:

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import InputError, shown, unknown_field
-from .mesh_objects import load
+from .mesh_objects import PLACEMENT_KEYS, check_height, load, parse_placement
 from .scene import Scene, SceneObject, Task
 from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
 from .template_files import BUILTIN_SET, TemplateSet, template_set
@@ -139,9 +139,11 @@ GENERATOR_KINDS = ("mug", "cup", "box", "mesh")
 DEFAULT_TEMPLATES = {"mug": "side_grasp", "cup": "handle_grasp", "box": "drawer_pull",
                      "mesh": "side_grasp"}
 _GENERATOR_KEYS = {"table", "sigma", "gap", "objects", "template_files"}
-_ENTRY_KEYS = {"kind", "weight", "radius", "height", "half_extents", "folder", "scale",
-               "templates"}
+_ENTRY_KEYS = {"kind", "weight", "radius", "height", "half_extents", "folder", "templates",
+               *PLACEMENT_KEYS}
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb")
+# Beside a folder's meshes: per file name, the placement keys that differ from the folder's.
+MANIFEST = "meshes.toml"
 
 
 def check_generator(table: Any, src: str, where: str = "source.generator",
@@ -151,9 +153,12 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
     ``objects``, a list of ``{kind, weight, ...}``: mugs and cups with ``radius`` and
     ``height`` ranges [low, high] (default the kind's size), boxes with ``half_extents``
     ranges ([[low, high]] x 3), meshes with a ``folder`` of mesh files (relative to
-    ``base_dir``) and a ``scale``; each entry's ``templates`` a table of template =
-    weight (default the kind's usual one). Returns plain data (folders made absolute,
-    each mesh file's CRC-32 beside it), marked ``checked``: what ``random_scene`` takes.
+    ``base_dir``), placed by the mesh keys ``up``, ``unit`` or ``scale``, ``rpy`` or
+    ``quat`` and ``origin`` (for the folder, and per file in a ``meshes.toml`` beside
+    them; an ``rpy``'s or ``quat``'s yaw is added to the drawn one); each entry's
+    ``templates`` a table of template = weight (default the kind's usual one). Returns
+    plain data (folders made absolute, each mesh file's CRC-32 and placement keys beside
+    it), marked ``checked``: what ``random_scene`` takes.
 
     >>> check_generator({"objects": [{"kind": "box"}]}, "cfg")["objects"][0]["templates"]
     {'drawer_pull': 1.0}
@@ -212,8 +217,8 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
             if key not in _ENTRY_KEYS:
                 raise bad(f"{w}.{key}", unknown_field(_ENTRY_KEYS, key))
         allowed = {"mug": {"radius", "height"}, "cup": {"radius", "height"},
-                   "box": {"half_extents"}, "mesh": {"folder", "scale"}}[kind]
-        for key in ("radius", "height", "half_extents", "folder", "scale"):
+                   "box": {"half_extents"}, "mesh": {"folder", *PLACEMENT_KEYS}}[kind]
+        for key in ("radius", "height", "half_extents", "folder", *PLACEMENT_KEYS):
             if key in e and key not in allowed:
                 raise bad(f"{w}.{key}", f"not a field of a {kind} entry")
         entry: dict[str, Any] = {"kind": kind, "weight": number(e.get("weight", 1.0),
@@ -242,7 +247,7 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
             # Their content names them in cache keys and the sweep's hash: a file changed
             # in place is a new mesh.
             entry["digests"] = [zlib.crc32(Path(f).read_bytes()) for f in files]
-            entry["scale"] = number(e.get("scale", 1.0), f"{w}.scale")
+            entry["placements"] = _placements(e, files, path, src, f"{where}.{w}.")
         templates = e.get("templates", {DEFAULT_TEMPLATES[kind]: 1})
         if not isinstance(templates, Mapping) or not templates:
             raise bad(f"{w}.templates", "must be a table of template = weight")
@@ -254,6 +259,53 @@ def check_generator(table: Any, src: str, where: str = "source.generator",
                           f"{', '.join(fits)})")
             entry["templates"][t] = number(weight, f"{w}.templates.{t}", hi=1e6)
         out["objects"].append(entry)
+    return out
+
+
+def _placements(entry: Mapping[str, Any], files: list[str], folder: Path, src: str,
+                where: str) -> list[dict[str, Any]]:
+    """Each mesh file's placement keys: the entry's, over which its line in the folder's
+    ``meshes.toml`` goes. Every file is read and placed here, once, so that a bad key, a
+    mesh below the table or one floating is said in one line before any scene is drawn
+    (a generator stands its meshes at z = 0)."""
+    import tomllib
+
+    base = {k: entry[k] for k in PLACEMENT_KEYS if k in entry}
+    manifest: dict[str, Any] = {}
+    listed = folder / MANIFEST
+    if listed.is_file():
+        try:
+            manifest = tomllib.loads(listed.read_text())
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+            raise InputError(listed, "<file>", f"not a readable TOML file ({e})") from None
+        names = {Path(f).name for f in files}
+        for name, keys in manifest.items():
+            if name not in names:
+                raise InputError(listed, name, f"no mesh file of that name beside it "
+                                 f"(files: {', '.join(sorted(names))})")
+            if not isinstance(keys, Mapping):
+                raise InputError(listed, name, "must be a table of placement keys")
+            for key in keys:
+                if key not in PLACEMENT_KEYS:
+                    raise InputError(listed, f"{name}.{key}", unknown_field(
+                        set(PLACEMENT_KEYS), key))
+    out = []
+    for f in files:
+        name = Path(f).name
+        own = manifest.get(name, {})
+        keys = {**base, **own}
+        if "unit" in own:
+            keys.pop("scale", None)
+        if "scale" in own:
+            keys.pop("unit", None)
+        if "quat" in own:
+            keys.pop("rpy", None)
+        if "rpy" in own:
+            keys.pop("quat", None)
+        file_src, fld = (listed, f"{name}.") if own else (src, where)
+        placement, _ = parse_placement(keys, None, str(file_src), fld)
+        check_height(load(f, placement, str(file_src), fld), 0.0, str(file_src), fld)
+        out.append(keys)
     return out
 
 
@@ -285,9 +337,13 @@ def _configured(rng: np.random.Generator, spec: dict, kind: str, n: int, seed: i
                 size = {"half_extents": he}
                 reach, oid = math.hypot(he[0], he[1]), f"box{i}"
             else:
-                file = e["files"][int(rng.integers(len(e["files"])))]
-                mesh = load(file, e["scale"], "<generator>", f"objects[{i}].")
+                pick = int(rng.integers(len(e["files"])))
+                file = e["files"][pick]
+                placement, turn = parse_placement(e["placements"][pick], None, "<generator>",
+                                                  f"objects[{i}].")
+                mesh = load(file, placement, "<generator>", f"objects[{i}].")
                 size = {"mesh": mesh}
+                yaw += turn
                 reach, oid = mesh.radius, f"{Path(file).stem}{i}"
             for _ in range(max_attempts):
                 xy = (rng.uniform([-half_x, -half_y], [half_x, half_y]) if kind == "uniform"

@@ -109,7 +109,8 @@ def _warn_units(scene: Scene) -> None:
 
     for o in scene.objects:
         where = f"objects[{o.id}]"
-        if abs(o.yaw) > 2 * math.pi:
+        rpy = o.mesh is not None and o.mesh.placement.turned_by != "yaw"  # warned of there
+        if abs(o.yaw) > 2 * math.pi and not rpy:
             warn(f"{where}.yaw", f"{o.yaw:g} rad is more than a full turn; if degrees were "
                  f"meant, that is yaw = {math.radians(o.yaw):.4f} (or write yaw_deg = "
                  f"{o.yaw:g})")

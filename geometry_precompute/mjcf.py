@@ -3,7 +3,8 @@ geoms (cylinders, boxes), and the position spaces as visual-only translucent geo
 initial in red and optimised in blue. MuJoCo has no cone geom, so cones become meshes
 (the manifold3d meshes of :mod:`geometry_precompute.meshes`, vertices in world
 coordinates; MuJoCo recentres a mesh and moves its geom frame to match, so it stays
-in place). Object bodies collide (contype 1); spaces never do (contype 0, group 1 for
+in place); a mesh object's geom stands at its origin, its vertices about it. Object
+bodies collide (contype 1); spaces never do (contype 0, group 1 for
 initial, group 2 for optimised spaces, so viewers can toggle them).
 """
 
@@ -30,11 +31,12 @@ def _fmt(v) -> str:
 
 
 def _geom(shape: Shape, name: str, rgba: str, collide: bool, group: int,
-          mesh: str | None = None) -> str:
+          mesh: str | None = None, at=None) -> str:
     flags = "" if collide else ' contype="0" conaffinity="0"'
     a, b, c = shape.dims
     if mesh is not None:
-        return f'<geom name={quoteattr(name)} type="mesh" mesh="{mesh}" rgba="{rgba}" ' \
+        pos = "" if at is None else f' pos="{_fmt(at)}"'
+        return f'<geom name={quoteattr(name)} type="mesh" mesh="{mesh}"{pos} rgba="{rgba}" ' \
                f'group="{group}"{flags}/>'
     size: tuple[float, ...]
     if shape.kind in ("cylinder", "disk"):
@@ -63,12 +65,14 @@ def scene_to_mjcf(result: PrecomputeResult, sections: int = 32, spaces: str = "b
             # show but ``shacc import-mjcf`` reads back.
             body = replace(body, quat=quat_of_rotation(yaw_matrix(o.yaw)))
         mesh = None
-        if o.mesh is not None:  # its solid, vertices in world coordinates (as the cones)
+        if o.mesh is not None:  # its solid, about its origin (where ``import-mjcf`` puts it)
             tm = object_solid(o)
             mesh = f"object:{o.id}"
-            assets.append(f'<mesh name={quoteattr(mesh)} vertex="{_fmt(tm.vertices)}" '
+            local = tm.vertices - np.asarray(o.position)
+            assets.append(f'<mesh name={quoteattr(mesh)} vertex="{_fmt(local)}" '
                           f'face="{" ".join(str(int(i)) for i in tm.faces.ravel())}"/>')
-        geoms.append(_geom(body, f"object:{o.id}", "0.25 0.25 0.28 1", True, 0, mesh))
+        geoms.append(_geom(body, f"object:{o.id}", "0.25 0.25 0.28 1", True, 0, mesh,
+                           o.position if mesh else None))
     which = {"both": ("init", "opt"), "init": ("init",), "opt": ("opt",), "none": ()}[spaces]
     for w in which:
         shapes = result.shapes_init if w == "init" else result.shapes_opt

@@ -30,7 +30,7 @@ from .templates import TaskSpace, resolve_tasks
 # give other answers (2: fast intersection volumes, issue 15; 3: 12 quadrature nodes per
 # cone x cylinder piece), so that results cached by an earlier version are computed
 # again rather than mixed with new ones.
-PRECOMPUTE_VERSION = 3
+PRECOMPUTE_VERSION = 4
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from .errors import InputError, shown, unknown_field
 from .errors import SceneWarning as SceneWarning  # its home before errors.py; imported from here
 from .fileio import check_depth, write_atomic
 from .fileio import read_toml as read_toml  # its home before fileio.py
-from .mesh_objects import MeshInfo, load
+from .mesh_objects import PLACEMENT_KEYS, MeshInfo, check_height, load, parse_placement
 from .settings import (
     COORD_LIMIT,
     DEFAULTS,
@@ -135,7 +135,7 @@ class Scene:
 
 _TOP_KEYS = {"name", "description", "objects", "tasks", "settings", "templates"}
 _OBJECT_KEYS = {"id", "kind", "position", "yaw", "yaw_deg", "radius", "height", "half_extents",
-                "mesh", "scale"}
+                "mesh", *PLACEMENT_KEYS}
 # Spellings in degrees, converted on load: the field, and the radian field it stands for.
 DEG_FIELDS = {"yaw_deg": "yaw", "half_angle_deg": "half_angle"}
 _TASK_KEYS = {"id", "object", "template", "bounds", "fixed"}
@@ -242,7 +242,7 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
     else:
         yaw = _number(raw.get("yaw", 0.0), src, where + "yaw", limit=YAW_LIMIT)
     if kind != "mesh":
-        for key in ("mesh", "scale"):
+        for key in ("mesh", *PLACEMENT_KEYS):
             if key in raw:
                 raise InputError(src, where + key, f"not a field of a {kind} (mesh objects "
                                  "only)")
@@ -251,12 +251,17 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
         for key in ("radius", "height", "half_extents"):
             if key in raw:
                 raise InputError(src, where + key, "not a field of a mesh (its size is its "
-                                 "file's, times scale)")
+                                 "file's, placed)")
         if "mesh" not in raw:
             raise InputError(src, where + "mesh", "missing required field for a mesh object")
         written = _string(raw["mesh"], src, where + "mesh")
-        scale = _number(raw.get("scale", 1.0), src, where + "scale", positive=True)
-        return SceneObject(oid, kind, position, yaw, mesh=load(written, scale, src, where))
+        if "scale" in raw:
+            _number(raw["scale"], src, where + "scale", positive=True)
+        placement, yaw = parse_placement(
+            raw, yaw if ("yaw" in raw or "yaw_deg" in raw) else None, src, where)
+        mesh = load(written, placement, src, where)
+        check_height(mesh, position[2], src, where)
+        return SceneObject(oid, kind, position, yaw, mesh=mesh)
     if kind == "box":
         for key in ("radius", "height"):
             if key in raw:
@@ -375,14 +380,13 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
     objs = []
     for o in scene.objects:
         d: dict[str, Any] = {"id": o.id, "kind": o.kind, "position": list(o.position)}
-        if o.yaw:
+        if o.yaw and o.mesh is None:
             d["yaw"] = o.yaw
         if o.kind == "box":
             d["half_extents"] = list(o.box_half_extents)
         elif o.mesh is not None:
             d["mesh"] = o.mesh.path  # where it is: the written path may be relative
-            if o.mesh.scale != 1.0:
-                d["scale"] = o.mesh.scale
+            d.update(o.mesh.placement.written(o.yaw))
         else:
             if o.radius != OBJECT_DEFAULTS[o.kind]["radius"]:
                 d["radius"] = o.radius

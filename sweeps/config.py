@@ -39,6 +39,7 @@ import hashlib
 import itertools
 import json
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,7 +49,7 @@ import numpy as np
 
 from geometry_precompute import DEFAULTS, InputError, load_scene, random_scene, schema
 from geometry_precompute.bodies import check_bodies_apart
-from geometry_precompute.errors import shown, unknown_field
+from geometry_precompute.errors import SceneWarning, shown, unknown_field
 from geometry_precompute.fileio import read_toml
 from geometry_precompute.generate import MAX_TASKS, PRESETS, check_generator
 from geometry_precompute.loading import scene_files
@@ -313,7 +314,8 @@ def _probe_scene(generator: dict | None = None) -> Scene:
                      if e["kind"] in ("mug", "cup") else
                      [{"half_extents": [r[1] for r in e["half_extents"]]}]
                      if e["kind"] == "box" else
-                     [{"mesh": f, "scale": e["scale"]} for f in e["files"]])
+                     [{"mesh": f, **p} for f, p in zip(e["files"], e["placements"],
+                                                        strict=True)])
             for k, size in enumerate(sizes):
                 oid = f"{e['kind']}{i}-{k}"
                 objects.append({"id": oid, "kind": e["kind"],
@@ -324,7 +326,9 @@ def _probe_scene(generator: dict | None = None) -> Scene:
         probe = {"name": "probe", "objects": objects, "tasks": tasks}
         if generator.get("template_files"):
             probe["templates"] = generator["template_files"]
-        return parse_scene(probe, "<generator>")
+        with warnings.catch_warnings():  # the meshes' warnings were said by check_generator
+            warnings.simplefilter("ignore", SceneWarning)
+            return parse_scene(probe, "<generator>")
     return parse_scene({"name": "probe", "objects": [
         {"id": "mug", "kind": "mug", "position": [0.0, 0.0, 0.0]},
         {"id": "cup", "kind": "cup", "position": [0.0, 5.0, 0.0]}], "tasks": [

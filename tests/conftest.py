@@ -137,7 +137,7 @@ def mesh_scenes(tmp_path_factory):
     gen = check_generator({"table": [0.7, 0.7], "sigma": 0.12, "objects": [
         {"kind": "mesh", "folder": str(KITCHEN_MESHES), "weight": 3,
          "templates": {"side_grasp": 2, "top_grasp": 1}},
-        {"kind": "mesh", "folder": str(parts), "weight": 2,
+        {"kind": "mesh", "folder": str(parts), "weight": 2, "origin": "base",
          "templates": {"side_grasp": 1, "top_grasp": 1}},
         {"kind": "mug", "radius": [0.035, 0.05]}, {"kind": "cup"},
         {"kind": "box", "half_extents": [[0.03, 0.05], [0.06, 0.1], [0.05, 0.12]],

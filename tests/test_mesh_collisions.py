@@ -82,10 +82,10 @@ def _scene():
             {"id": "bowl", "kind": "mesh", "mesh": f"{KITCHEN}/bowl.stl",
              "position": [0.3, 0.0, 0.0]},
             {"id": "handle", "kind": "mesh", "position": [0.0, 0.35, 0.0], "yaw": -1.0,
-             "mesh": f"{assets}/barkour_v0/assets/handle.stl"},
-            {"id": "part", "kind": "mesh", "position": [0.3, 0.35, 0.0],
+             "origin": "base", "mesh": f"{assets}/barkour_v0/assets/handle.stl"},
+            {"id": "part", "kind": "mesh", "position": [0.3, 0.35, 0.0], "origin": "base",
              "mesh": f"{assets}/barkour_v0/assets/abduction.stl"},
-            {"id": "thumb", "kind": "mesh", "position": [-0.2, 0.2, 0.0], "scale": 0.001,
+            {"id": "thumb", "kind": "mesh", "position": [-0.2, 0.2, 0.0118], "scale": 0.001,
              "mesh": f"{assets}/shadow_hand/assets/th_proximal.obj"},
             {"id": "mug", "kind": "mug", "position": [0.15, 0.2, 0.0]}],
         "tasks": [{"id": "t", "object": "bowl", "template": "top_grasp"}]}, "<meshes>")

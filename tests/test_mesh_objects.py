@@ -82,11 +82,11 @@ def _real_scene(folder: Path) -> Path:
     scene = {
         "name": "real-meshes",
         "objects": [
-            {"id": "handle", "kind": "mesh", "position": [0.0, 0.2, 0.0],
+            {"id": "handle", "kind": "mesh", "position": [0.0, 0.2, 0.0], "origin": "base",
              "mesh": str(MJX_MESHES / "barkour_v0" / "assets" / "handle.stl")},
             {"id": "body", "kind": "mesh", "position": [0.05, -0.25, 0.0], "yaw": 0.4,
-             "mesh": str(MJX_MESHES / "barkour_v0" / "assets" / "body.stl")},
-            {"id": "thumb", "kind": "mesh", "position": [0.0, 0.0, 0.0], "scale": 0.001,
+             "origin": "base", "mesh": str(MJX_MESHES / "barkour_v0" / "assets" / "body.stl")},
+            {"id": "thumb", "kind": "mesh", "position": [0.0, 0.0, 0.0118], "unit": "mm",
              "mesh": str(MJX_MESHES / "shadow_hand" / "assets" / "th_proximal.obj")},
             {"id": "mug", "kind": "mug", "position": [-0.1, 0.05, 0.0]},
         ],

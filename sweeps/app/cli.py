@@ -241,6 +241,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a task (may be repeated; added to the mapping's)")
     c.add_argument("--obstacle", action="append", default=[], metavar="NAME",
                    help="a geom or body that becomes an object without a task")
+    c.add_argument("--max-tilt", type=float, default=1.0, metavar="DEG",
+                   help="level cylinders and boxes tilted less than this, with a warning "
+                   "(default 1 degree)")
+    c.add_argument("--stand", action="store_true", help="move every object up or down "
+                   "until its lowest point is on the table (z = 0): for an object file "
+                   "that centres its object on the origin")
     c.set_defaults(func="import_cmd:cmd_import_mjcf")
 
     c = command("check-collisions", "the gripper collision check of a scene against CPU "

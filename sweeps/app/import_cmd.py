@@ -10,12 +10,13 @@ import os
 import shutil
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import tomli_w
 
 from geometry_precompute import InputError, load_scene, precompute
-from geometry_precompute.errors import HostError
+from geometry_precompute.errors import HostError, SceneWarning
 from geometry_precompute.fileio import read_toml, write_atomic
 from geometry_precompute.mjcf_import import import_mjcf
 from sweeps.output import check_output_file, nearest_existing
@@ -37,6 +38,13 @@ def _mapping(args) -> tuple[dict, str]:
     return mapping, src
 
 
+def _stand(rule: str) -> str:
+    """The hint for an object placed below or above the table: what ``--stand`` does."""
+    if "below the table" in rule or "above the table" in rule:
+        return "; --stand stands every object on the table"
+    return ""
+
+
 def cmd_import_mjcf(args) -> int:
 
     out = Path(args.out)
@@ -54,14 +62,23 @@ def cmd_import_mjcf(args) -> int:
         raise HostError(base, "make a working folder", e.strerror or str(e)) from None
     try:
 
-        table = import_mjcf(args.xml, mapping, work, src)
+        if not 0.0 <= args.max_tilt <= 45.0:
+            raise InputError("<arguments>", "--max-tilt", f"must be in [0, 45] degrees, got "
+                             f"{args.max_tilt:g}")
+        table = import_mjcf(args.xml, mapping, work, src, args.max_tilt, args.stand)
         scene_file = work / out.name
         write_atomic(scene_file, tomli_w.dumps(table).encode())
         try:
-            scene = load_scene(scene_file)
-            precompute(scene, scene.settings())  # every rule, interpenetration included
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", SceneWarning)
+                scene = load_scene(scene_file)
+                precompute(scene, scene.settings())  # every rule, interpenetration included
         except InputError as e:  # named by the scene it would have been, not the draft
-            raise InputError(f"{out} (from {args.xml})", e.field, e.rule) from None
+            raise InputError(f"{out} (from {args.xml})", e.field, e.rule + _stand(e.rule)
+                             ) from None
+        for w in caught:  # the same: the draft's warnings named by the scene
+            said = str(w.message).replace(str(scene_file), str(out))
+            warnings.warn(SceneWarning(said + _stand(said)), stacklevel=2)
         meshes = [o["mesh"] for o in table["objects"] if o["kind"] == "mesh"]
         try:
             folder.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,8 @@ import json
 from geometry_precompute.file_schema import (
     DRAFT,
     _vector,
+    placement_properties,
+    placement_rules,
     scene_schema,
     settings_schema,
     templates_schema,
@@ -25,8 +27,9 @@ LOADER_ONLY = [
     "the axes and [[points]] give at most 100 000 points",
     "every template of the settings fits the scenes' objects",
     "source.generator: ranges low <= high, templates that fit their entry's kind, fields "
-    "of the entry's kind only, a mesh folder that holds mesh files, template files that "
-    "exist and are valid",
+    "of the entry's kind only, a mesh folder that holds mesh files (each placed on the "
+    "table, its meshes.toml naming files of the folder), template files that exist and "
+    "are valid",
     "the rules of a scene's [settings] that a schema cannot state, for every value",
 ]
 
@@ -44,11 +47,11 @@ def _generator_schema() -> dict:
             "weight": {"type": "number", "exclusiveMinimum": 0, "maximum": 1e6},
             "radius": span(), "height": span(), "half_extents": _vector(3, span()),
             "folder": {"type": "string", "minLength": 1},
-            "scale": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
+            **placement_properties(),
             "templates": {"type": "object", "minProperties": 1,
                           "additionalProperties": {"type": "number", "exclusiveMinimum": 0,
                                                    "maximum": 1e6}}},
-        "additionalProperties": False}
+        "additionalProperties": False, "allOf": placement_rules()}
     return {"type": "object", "properties": {
         "table": _vector(2, {"type": "number", "exclusiveMinimum": 0, "maximum": 20}),
         "sigma": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},

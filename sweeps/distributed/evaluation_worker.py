@@ -18,6 +18,7 @@ import platform
 import socket
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Any
@@ -28,6 +29,7 @@ import pyarrow as pa
 from geometry_precompute import precompute, random_scene
 from geometry_precompute.baking import concatenate
 from geometry_precompute.batch import bake_batch, point_settings
+from geometry_precompute.errors import SceneWarning
 from geometry_precompute.outcomes import scene_metrics
 from geometry_precompute.population import POPULATED
 from geometry_precompute.scene import Scene
@@ -62,6 +64,7 @@ class ChunkResult:
     compiled: int = 0              # programs XLA built for this chunk
     loaded: int = 0                # programs read from the persistent cache instead
     worker: str = ""
+    scene_warnings: tuple[str, ...] = ()  # the precompute's, "scene NAME: MESSAGE"
 
 
 # The rollout fields the tables hold, and the dtypes they travel in; only these are copied
@@ -204,10 +207,12 @@ def _warm_up(job: ChunkJob, ref) -> dict:
     WARM_UP_MARKS["device"] = time.time()
     before = dict(_COUNTS)
     t0 = time.perf_counter()
-    scene = ref if isinstance(ref, Scene) else random_scene(*ref)
     settings = point_settings(list(job.points))
-    batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
-                       job.shapes.tasks, job.shapes.objects, 0.0, settings)
+    with warnings.catch_warnings():  # the scene's precompute task says its warnings
+        warnings.simplefilter("ignore", SceneWarning)
+        scene = ref if isinstance(ref, Scene) else random_scene(*ref)
+        batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
+                           job.shapes.tasks, job.shapes.objects, 0.0, settings)
     WARM_UP_MARKS["baked"] = time.time()
     _evaluate([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes], job.modes)
     WARM_UP_MARKS["ended"] = time.time()
@@ -256,7 +261,8 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
                        {"precomputed": sum(b.precomputed for b in batches),
                         "cache_hits": sum(b.cache_hits for b in batches),
                         "cache_warning": next((b.cache_warning for b in batches
-                                               if b.cache_warning), None)},
+                                               if b.cache_warning), None),
+                        "scene_warnings": tuple(w for b in batches for w in b.scene_warnings)},
                        {"precompute": sum(b.seconds for b in batches),
                         "join": time.perf_counter() - t0})
 
@@ -352,4 +358,5 @@ def encode_chunk(job: ChunkJob, arrays: ChunkArrays) -> ChunkResult:
                        arrays.counts["precomputed"], arrays.counts["cache_hits"],
                        arrays.counts["cache_warning"],
                        {**arrays.seconds, "tables": time.perf_counter() - t0},
-                       arrays.compiled, arrays.loaded, arrays.worker)
+                       arrays.compiled, arrays.loaded, arrays.worker,
+                       arrays.counts.get("scene_warnings", ()))

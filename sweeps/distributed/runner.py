@@ -342,6 +342,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     # sweep's size.
     cap = max(4 * len(todo[0].scenes) * pool.evaluate_workers,
               lookahead * pool.precompute_threads)
+    told: set[str] = set()  # the scenes' warnings said so far
     busy = dict.fromkeys(("precompute", "warm_up", "join", "evaluate", "tables", "write"),
                          0.0)
     totals: dict[str, Any] = {"rollouts_this_run": 0, "precomputed": 0, "precompute_cache_hits": 0,
@@ -436,6 +437,10 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             totals["rollouts_this_run"] += res.n_rollouts
             totals["precomputed"] += res.precomputed
             totals["precompute_cache_hits"] += res.cache_hits
+            for line in res.scene_warnings:  # each once, as ``evaluate`` says them
+                if line not in told:
+                    told.add(line)
+                    tqdm.write(f"warning: {line}", file=sys.stderr)
             if res.cache_warning and "cache_warning" not in totals:
                 totals["cache_warning"] = res.cache_warning
                 tqdm.write(f"warning: {res.cache_warning}; the sweep goes on without storing "
