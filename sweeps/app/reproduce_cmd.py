@@ -69,9 +69,13 @@ def _ratio(a, b):
     return None if a in (None, 0) or b is None else (b - a) / a
 
 
+_BEGUN = time.perf_counter()
+
+
 def _log(*parts) -> None:
-    """Progress lines go to stderr: stdout is kept for results."""
-    print(*parts, file=sys.stderr, flush=True)
+    """Progress lines go to stderr (stdout is kept for results), each with the seconds
+    since the command began, so that a slow stage shows where it is."""
+    print(f"[{time.perf_counter() - _BEGUN:6.1f} s]", *parts, file=sys.stderr, flush=True)
 
 
 def _optimized_clutteredness(r: PrecomputeResult, q: np.ndarray) -> float:
@@ -100,7 +104,8 @@ def _precompute(items: list, workers: int | None) -> list[PrecomputeResult]:
 def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         field_grid: int = 64, overrides: dict | None = None, workers: int | None = None,
         readme: Path | None = None, preset: str = "paper") -> dict:
-    t_start = time.perf_counter()
+    global _BEGUN
+    t_start = _BEGUN = time.perf_counter()
     settings = DEFAULTS.with_overrides(overrides or {}, "<--set>")
     if quick:
         settings = settings.with_overrides({"bootstrap_resamples": 200})
