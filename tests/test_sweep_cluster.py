@@ -269,8 +269,10 @@ def test_a_chunk_evaluates_the_same_however_its_precompute_was_split(tmp_path):
     whole = joined(range(9))  # from the cache the split run filled
     assert split.bakes[0].n_scenes == shp.scenes
     assert split.labels["name"] == [random_scene(*cfg.random_ref(i)).name for i in range(9)]
-    assert split.counts == {"precomputed": 9, "cache_hits": 0, "cache_warning": None}
-    assert whole.counts == {"precomputed": 0, "cache_hits": 9, "cache_warning": None}
+    assert split.counts == {"precomputed": 9, "cache_hits": 0, "cache_warning": None,
+                            "scene_warnings": ()}
+    assert whole.counts == {"precomputed": 0, "cache_hits": 9, "cache_warning": None,
+                            "scene_warnings": ()}
     a, b = evaluate_chunk(job, split), evaluate_chunk(job, whole)
     assert a.labels == b.labels
     for x, y in zip(a.rollouts, b.rollouts, strict=True):
