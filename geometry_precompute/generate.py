@@ -32,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import InputError, shown, unknown_field
+from .fileio import read_toml
 from .mesh_objects import PLACEMENT_KEYS, check_height, load, parse_placement
 from .scene import Scene, SceneObject, Task
 from .settings import LENGTH_LIMIT, OBJECT_DEFAULTS
@@ -268,16 +269,11 @@ def _placements(entry: Mapping[str, Any], files: list[str], folder: Path, src: s
     ``meshes.toml`` goes. Every file is read and placed here, once, so that a bad key, a
     mesh below the table or one floating is said in one line before any scene is drawn
     (a generator stands its meshes at z = 0)."""
-    import tomllib
-
     base = {k: entry[k] for k in PLACEMENT_KEYS if k in entry}
     manifest: dict[str, Any] = {}
     listed = folder / MANIFEST
     if listed.is_file():
-        try:
-            manifest = tomllib.loads(listed.read_text())
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-            raise InputError(listed, "<file>", f"not a readable TOML file ({e})") from None
+        manifest = read_toml(listed, "a manifest of mesh placements (TOML)")
         names = {Path(f).name for f in files}
         for name, keys in manifest.items():
             if name not in names:
