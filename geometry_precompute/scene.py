@@ -255,8 +255,6 @@ def _parse_object(raw: Any, i: int, src: str) -> SceneObject:
         if "mesh" not in raw:
             raise InputError(src, where + "mesh", "missing required field for a mesh object")
         written = _string(raw["mesh"], src, where + "mesh")
-        if "scale" in raw:
-            _number(raw["scale"], src, where + "scale", positive=True)
         placement, yaw = parse_placement(
             raw, yaw if ("yaw" in raw or "yaw_deg" in raw) else None, src, where)
         mesh = load(written, placement, src, where)
