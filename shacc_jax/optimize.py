@@ -397,7 +397,12 @@ def _search_groups(baked, scenes_per_call, population, generations, candidates) 
             idx = members[np.minimum(np.arange(a, a + per), len(members) - 1)]
             keep = members[a:a + per]
             piece = (cut(geometry, idx, n), cut(params, idx, n), cut(problem, idx, n))
-            found = program_cache.call("search", _search, static, piece, _SEARCH_STRUCTURE)
+            # Its activation rollouts: each generation's population from the search starts,
+            # then the candidates, Shrinking's and the initial sizes from the validation's.
+            work = len(idx) * n * (population * generations * problem.opt_starts.shape[1]
+                                   + (candidates + 2) * n_val)
+            found = program_cache.call("search", _search, static, piece, _SEARCH_STRUCTURE,
+                                       work=work)
             found = jax.tree.map(lambda x, keep=keep: np.asarray(x)[:len(keep)], found)
             out.q[keep, :n] = found.q
             for name in Search._fields[1:]:

@@ -32,6 +32,17 @@ from geometry_precompute.fileio import seal, unseal, write_atomic
 _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
 _LOADED: dict[str, Callable] = {}  # key -> the deserialised program, jitted, this process
+_QUICK: dict[str, Callable] = {}  # name -> the jitted function compiled with QUICK_OPTIONS
+
+# A CPU program that evaluates at most this many rollouts is compiled with LLVM's passes
+# off (QUICK_OPTIONS). On the 2-core CPU a program then compiles 3-35 s faster and runs
+# about 10x slower (74 us more a closed-form rollout, 180 us more a stepped one), so
+# below this size the compile time saved outweighs the run time lost (docs/DECISIONS.md,
+# "Small CPU programs"). The answers are the same bits at either level: XLA fixes the
+# arithmetic before LLVM, which may not reassociate or fuse without fast math, and the
+# CPU code generation is pinned without FMA (tests/test_quick_compile.py).
+QUICK_COMPILE_ROLLOUTS = 32_768
+QUICK_OPTIONS = {"xla_backend_optimization_level": 0}
 
 
 def set_dir(path: str | Path | None) -> None:
@@ -64,6 +75,7 @@ def release_compiled() -> None:
     releases after every module, and after any test that leaves 30 000 maps; a
     notebook that sweeps hundreds of settings in one kernel can call it between them."""
     _LOADED.clear()
+    _QUICK.clear()
     jax.clear_caches()
     gc.collect()
 
@@ -95,21 +107,58 @@ def program_key(name: str, static: tuple, tree, leaves: list) -> str:
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 
 
-def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
+def quick(work: int, leaves: list) -> bool:
+    """Whether a program of ``work`` rollouts on the device of ``leaves`` is compiled
+    with :data:`QUICK_OPTIONS`: CPU programs of at most :data:`QUICK_COMPILE_ROLLOUTS`.
+    An accelerator's programs keep XLA's defaults.
+
+    >>> quick(400, []) == (jax.default_backend() == "cpu")
+    True
+    >>> quick(10**6, [])
+    False
+    """
+    if work > QUICK_COMPILE_ROLLOUTS:
+        return False
+    first = leaves[0] if leaves else None
+    if isinstance(first, jax.Array):
+        return all(d.platform == "cpu" for d in first.devices())
+    return jax.default_backend() == "cpu"
+
+
+def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
+         work: int | None = None):
     """``jitted(*args, **static)`` through the exported program cache.
 
     ``jitted`` is a ``jax.jit`` function whose static arguments are ``static``; it
     takes the pytrees ``args`` and returns a pytree shaped like ``out_example`` (any
-    instance of the output type: only its structure is used). Without a cache folder
-    this is the plain call.
+    instance of the output type: only its structure is used). ``work``: the rollouts
+    the program evaluates, which decides its compiler options (:func:`quick`; None:
+    XLA's defaults). Without a cache folder this is the plain call.
     """
-    if _DIR is None:
-        return jitted(*args, **static)
     leaves, in_tree = jax.tree.flatten(args)
+    options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
+    if _DIR is None:
+        if options is None:
+            return jitted(*args, **static)
+        fast = _QUICK.get(name)
+        if fast is None:
+            fast = _QUICK[name] = jax.jit(jitted.__wrapped__,  # type: ignore[attr-defined]
+                                          static_argnames=tuple(static),
+                                          compiler_options=options)
+        return fast(*args, **static)
+    run = _loaded(_DIR, name, jitted, static, in_tree, leaves, options)
+    return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
+
+
+def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
+            leaves: list, options: dict | None) -> Callable:
+    """The jitted program of a call: this process's, else the one exported to
+    ``folder``, else traced and exported now."""
     key = program_key(name, tuple(sorted(static.items())), in_tree, leaves)
-    run = _LOADED.get(key)
+    loaded = key if options is None else f"{key}-quick"  # one export, either options
+    run = _LOADED.get(loaded)
     if run is None:
-        path = _DIR / f"export-{name}-{key}.bin"
+        path = folder / f"export-{name}-{key}.bin"
         exp = None
         try:
             payload = unseal(key, path.read_bytes())
@@ -128,8 +177,8 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example):
             specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
             exp = export.export(jax.jit(flat))(*specs)
             _store(path, seal(key, bytes(exp.serialize())))
-        run = _LOADED[key] = jax.jit(exp.call)
-    return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
+        run = _LOADED[loaded] = jax.jit(exp.call, compiler_options=options)
+    return run
 
 
 def _store(path: Path, data: bytes) -> None:

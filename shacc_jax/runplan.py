@@ -337,8 +337,16 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
     (every copy started before the first is waited for)."""
     geometry, params = jax.device_put((geometry, params), device)
     ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
-                            _EVALUATION_STRUCTURE)
+                            _EVALUATION_STRUCTURE, work=_rollouts(geometry, params, layout))
     return _copied_back({k: getattr(ev.rollouts, k) for k in fields})
+
+
+def _rollouts(geometry: Geometry, params: Params, layout: Layout) -> int:
+    """The rollouts one evaluation program runs: points x scenes x modes x starts x
+    tasks, padding included (what decides its compiler options)."""
+    S, N = geometry.starts.shape[:2]
+    points = params[0].shape[0] if params[0].ndim > 1 else 1
+    return points * S * N * geometry.task_mask.shape[1] * len(layout.modes)
 
 
 def _copied_back(wanted: dict) -> Rollouts:
@@ -376,7 +384,8 @@ def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: L
         mesh, PartitionSpec(*[None] * lead, "scenes")))
     out = program_cache.call("evaluate-parts", _evaluate_parts,
                              {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
-                             (geometry, params), tuple(fields))
+                             (geometry, params), tuple(fields),
+                             work=_rollouts(geometry, params, layout))
     return _copied_back(dict(zip(fields, out, strict=True)))
 
 

@@ -1,0 +1,80 @@
+"""Small CPU programs are compiled with LLVM's passes off (``program_cache.quick``), large
+ones with XLA's defaults: a scene evaluated alone and the same scene inside a sweep
+then come from programs compiled at different levels, so the two levels must give the
+same bits. Held here for the closed form with collision checks, and for the stepped
+users with every imperfection in the paper's and the intent modes."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+from geometry_precompute import (
+    bake,
+    load_scene,
+    precompute,
+    random_scene,
+    shipped_scene_paths,
+)
+from shacc_jax import evaluation, program_cache
+from shacc_jax.runplan import _rollouts
+from shacc_jax.types import inputs
+
+LEVEL = "xla_backend_optimization_level"
+EVERY_USER = {"user_noise": 0.2, "user_noise_tau": 0.5, "user_tremor": 0.01,
+              "user_input": "modes", "user_switch": 0.3}
+
+
+def _at_levels(baked, modes):
+    """Every field of the evaluation compiled at backend level 0 and at level 3."""
+    g, p, layout = inputs(baked, modes)
+    lowered = evaluation.evaluate.lower(g, p, layout)
+    out = []
+    for level in (0, 3):
+        ev = jax.device_get(lowered.compile({LEVEL: level})(g, p))
+        out.append(jax.tree.leaves(ev))
+    return out
+
+
+def _assert_same_bits(a, b):
+    assert len(a) == len(b)
+    for i, (x, y) in enumerate(zip(a, b, strict=True)):
+        x, y = np.asarray(x), np.asarray(y)
+        assert x.shape == y.shape and x.tobytes() == y.tobytes(), i
+
+
+def test_the_closed_form_with_collision_checks_is_the_same_bits_at_either_level():
+    results = [precompute(load_scene(p), {"collision": "on", "start_grid": [4, 3]})
+               for p in shipped_scene_paths()[:6]]
+    low, high = _at_levels(bake(results), ("baseline", "shrinking", "shacc"))
+    _assert_same_bits(low, high)
+    assert any(np.asarray(x).dtype.kind == "f" for x in low)
+
+
+def test_every_user_in_a_paper_and_an_intent_mode_stepped_is_the_same_bits_at_either_level():
+    results = [precompute(random_scene(70 + i, ("uniform", "gaussian")[i], 3, 5),
+                          {**EVERY_USER, "start_grid": [3, 3]}) for i in range(2)]
+    low, high = _at_levels(bake(results), ("shacc", "ho"))
+    _assert_same_bits(low, high)
+
+
+@pytest.mark.parametrize(("work", "quick"), [(400, True),
+                                             (program_cache.QUICK_COMPILE_ROLLOUTS, True),
+                                             (program_cache.QUICK_COMPILE_ROLLOUTS + 1,
+                                              False)])
+def test_only_small_cpu_programs_compile_quickly(work, quick):
+    assert program_cache.quick(work, [np.zeros(2)]) is quick  # the suite runs on CPUs
+    x = jax.device_put(np.zeros(2), jax.devices("cpu")[0])
+    assert program_cache.quick(work, [x]) is quick
+
+
+def test_a_programs_work_counts_points_scenes_modes_starts_and_tasks():
+    results = [precompute(load_scene(p), {"start_grid": [4, 3]})
+               for p in shipped_scene_paths()[:2]]
+    b = bake(results)
+    g, p, layout = inputs(b, ("baseline", "shacc"))
+    S, N, T = g.starts.shape[0], g.starts.shape[1], g.task_mask.shape[1]
+    assert _rollouts(g, p, layout) == S * N * T * 2
+    points = type(p)._make(np.stack([a, a, a]) for a in p)
+    assert _rollouts(g, points, layout) == 3 * S * N * T * 2
