@@ -34,10 +34,11 @@ _SOURCE_HASH: str | None = None
 _LOADED: dict[str, Callable] = {}  # key -> the deserialised program, jitted, this process
 _QUICK: dict[str, Callable] = {}  # name -> the jitted function compiled with QUICK_OPTIONS
 
-# A CPU program that evaluates at most this many rollouts is compiled with LLVM's passes
-# off (QUICK_OPTIONS). On the 2-core CPU a program then compiles 3-35 s faster and runs
-# about 10x slower (74 us more a closed-form rollout, 180 us more a stepped one), so
-# below this size the compile time saved outweighs the run time lost (docs/DECISIONS.md,
+# A CPU program whose work is at most this many closed-form rollouts (a stepped or an
+# intent mode's rollout counts as several: shacc_jax.runplan.RUN_COST) is compiled with
+# LLVM's passes off (QUICK_OPTIONS). On the 2-core CPU a program then compiles 3-35 s
+# faster and runs about 10x slower (74 us more a closed-form rollout), so below this
+# size the compile time saved outweighs the run time lost (docs/DECISIONS.md,
 # "Small CPU programs"). The answers are the same bits at either level: XLA fixes the
 # arithmetic before LLVM, which may not reassociate or fuse without fast math, and the
 # CPU code generation is pinned without FMA (tests/test_quick_compile.py).
@@ -108,9 +109,10 @@ def program_key(name: str, static: tuple, tree, leaves: list) -> str:
 
 
 def quick(work: int, leaves: list) -> bool:
-    """Whether a program of ``work`` rollouts on the device of ``leaves`` is compiled
-    with :data:`QUICK_OPTIONS`: CPU programs of at most :data:`QUICK_COMPILE_ROLLOUTS`.
-    An accelerator's programs keep XLA's defaults.
+    """Whether a program of ``work`` (closed-form rollouts, or rollouts weighted by their
+    run time against one) on the device of ``leaves`` is compiled with
+    :data:`QUICK_OPTIONS`: CPU programs of at most :data:`QUICK_COMPILE_ROLLOUTS`. An
+    accelerator's programs keep XLA's defaults.
 
     >>> quick(400, []) == (jax.default_backend() == "cpu")
     True
@@ -131,9 +133,10 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
 
     ``jitted`` is a ``jax.jit`` function whose static arguments are ``static``; it
     takes the pytrees ``args`` and returns a pytree shaped like ``out_example`` (any
-    instance of the output type: only its structure is used). ``work``: the rollouts
-    the program evaluates, which decides its compiler options (:func:`quick`; None:
-    XLA's defaults). Without a cache folder this is the plain call.
+    instance of the output type: only its structure is used). ``work``: what the
+    program evaluates, in closed-form rollouts, which decides its compiler options
+    (:func:`quick`; None: XLA's defaults). Without a cache folder this is the plain
+    call.
     """
     leaves, in_tree = jax.tree.flatten(args)
     options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None

@@ -337,16 +337,30 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
     (every copy started before the first is waited for)."""
     geometry, params = jax.device_put((geometry, params), device)
     ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
-                            _EVALUATION_STRUCTURE, work=_rollouts(geometry, params, layout))
+                            _EVALUATION_STRUCTURE, work=_work(geometry, params, layout))
     return _copied_back({k: getattr(ev.rollouts, k) for k in fields})
 
 
-def _rollouts(geometry: Geometry, params: Params, layout: Layout) -> int:
-    """The rollouts one evaluation program runs: points x scenes x modes x starts x
-    tasks, padding included (what decides its compiler options)."""
+# A rollout's run time against a perfect user's closed-form one, on the 2-core CPU at
+# XLA's default level (benchmarks/RESULTS.md, 100 random 10-task scenes): 8.3 us
+# closed form; 20 us with collision checks; 46 us stepped with every user setting; 536
+# us in the intent modes. What decides a program's compiler options
+# (program_cache.quick) is its rollouts weighted by these.
+RUN_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 64}
+
+
+def _work(geometry: Geometry, params: Params, layout: Layout) -> int:
+    """The work of one evaluation program, in closed-form rollouts: points x scenes x
+    starts x tasks (padding included) per mode, each weighted by its :data:`RUN_COST`
+    (intent modes, stepped users, collision checks)."""
     S, N = geometry.starts.shape[:2]
     points = params[0].shape[0] if params[0].ndim > 1 else 1
-    return points * S * N * geometry.task_mask.shape[1] * len(layout.modes)
+    per_mode = points * S * N * geometry.task_mask.shape[1]
+    base = RUN_COST["stepped"] if layout.stepped_users else RUN_COST["closed"]
+    if layout.collision_checks:
+        base *= RUN_COST["collision"]
+    return sum(per_mode * (RUN_COST["intent"] if m in INTENT_MODES else base)
+               for m in layout.modes)
 
 
 def _copied_back(wanted: dict) -> Rollouts:
@@ -385,7 +399,7 @@ def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: L
     out = program_cache.call("evaluate-parts", _evaluate_parts,
                              {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
                              (geometry, params), tuple(fields),
-                             work=_rollouts(geometry, params, layout))
+                             work=_work(geometry, params, layout))
     return _copied_back(dict(zip(fields, out, strict=True)))
 
 

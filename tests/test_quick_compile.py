@@ -18,7 +18,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from shacc_jax import evaluation, program_cache
-from shacc_jax.runplan import _rollouts
+from shacc_jax.runplan import RUN_COST, _work
 from shacc_jax.types import inputs
 
 LEVEL = "xla_backend_optimization_level"
@@ -69,12 +69,18 @@ def test_only_small_cpu_programs_compile_quickly(work, quick):
     assert program_cache.quick(work, [x]) is quick
 
 
-def test_a_programs_work_counts_points_scenes_modes_starts_and_tasks():
+def test_a_programs_work_weighs_each_modes_rollouts_by_their_cost():
     results = [precompute(load_scene(p), {"start_grid": [4, 3]})
                for p in shipped_scene_paths()[:2]]
     b = bake(results)
     g, p, layout = inputs(b, ("baseline", "shacc"))
     S, N, T = g.starts.shape[0], g.starts.shape[1], g.task_mask.shape[1]
-    assert _rollouts(g, p, layout) == S * N * T * 2
+    assert _work(g, p, layout) == S * N * T * 2
     points = type(p)._make(np.stack([a, a, a]) for a in p)
-    assert _rollouts(g, points, layout) == 3 * S * N * T * 2
+    assert _work(g, points, layout) == 3 * S * N * T * 2
+    g, p, layout = inputs(b, ("baseline", "blend"))
+    assert _work(g, p, layout) == S * N * T * (1 + RUN_COST["intent"])
+    user = bake([precompute(load_scene(p), {"start_grid": [4, 3], "user_tremor": 0.01})
+                 for p in shipped_scene_paths()[:2]])
+    g, p, layout = inputs(user, ("baseline",))
+    assert layout.stepped_users and _work(g, p, layout) == S * N * T * RUN_COST["stepped"]
