@@ -178,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start grid per side for Fig. 7 (default 64; 16 with --quick)")
     _add_set(c)
     c.add_argument("--workers", type=_int_in(1, 1024), default=None,
-                   help="precompute processes (default: one per CPU)")
+                   help="precompute processes (default: three quarters of the CPUs)")
     c.add_argument("--readme", type=_path, help="also rewrite the marked section of this README")
     c.set_defaults(func="reproduce_cmd:cmd_reproduce")
 
@@ -189,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--cache", type=_path,
                    help="precompute cache folder (default ~/.cache/shacc/precompute)")
     c.add_argument("--workers", type=_int_in(1, 1024), default=None,
-                   help="precompute processes (default: one per CPU)")
+                   help="precompute processes (default: three quarters of the CPUs)")
     c.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786) instead of "
                    "a local one; overrides the config's scheduler. A refused connection is an "

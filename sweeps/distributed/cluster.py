@@ -2,7 +2,8 @@
 
 Two kinds of worker, told apart by Dask resources:
 
-- ``precompute``: one thread per CPU core, no JAX (``geometry_precompute.batch``);
+- ``precompute``: one thread each, no JAX (``geometry_precompute.batch``); a local
+  cluster starts :func:`default_precompute_workers` of them;
 - ``evaluate``: one per GPU, pinned to it (``CUDA_VISIBLE_DEVICES``), or one on the
   CPU where there is no GPU (``sweeps.distributed.evaluation_worker``).
 
@@ -210,16 +211,31 @@ def start_fork_server() -> bool:
     return method == "forkserver"
 
 
+def default_precompute_workers() -> int:
+    """The local cluster's precompute workers when none are asked for: three quarters of
+    the cores, at least one. More are slower: a worker's CPU time per scene grows with
+    their number (shared caches and memory bandwidth), and the evaluation workers, the
+    tables and the client need cores too. Measured with ``benchmarks/scaling.sh``
+    (100 000 scenes, benchmarks/RESULTS.md): on 64 cores and 4 GPUs 32 and 48 workers
+    took 40 s and 62 took 57 s; on 32 cores and 2 GPUs 24 took 55 s and 31 took 61 s.
+
+    >>> default_precompute_workers() == max(1, (os.cpu_count() or 1) * 3 // 4)
+    True
+    """
+    return max(1, (os.cpu_count() or 1) * 3 // 4)
+
+
 def _local(workers: int | None, warm_up: tuple | None,
            evaluate: bool) -> tuple[object, int, int]:
-    """The local cluster: ``workers`` precompute workers (default one per core) and, if
+    """The local cluster: ``workers`` precompute workers (default
+    :func:`default_precompute_workers`) and, if
     ``evaluate``, one evaluation worker per GPU (one on the CPU where there is none)."""
     from distributed import Nanny, Scheduler, SpecCluster  # deferred: 1.1 s to import
 
     from sweeps.distributed.worker_setup import WorkerSetup  # deferred: 1.5 s to import
 
     start_fork_server()
-    n_cpu = workers or os.cpu_count() or 1
+    n_cpu = workers or default_precompute_workers()
     # Workers log nothing below CRITICAL: a closing cluster makes them log connection
     # errors (with tracebacks) that are no error of the sweep's; task errors reach the
     # command through their futures.
@@ -359,7 +375,8 @@ def connect(scheduler: str | None = None, workers: int | None = None,
             timeout: float = 60.0, warm_up: tuple | None = None,
             evaluate: bool = True) -> Iterator[Pool]:
     """A :class:`Pool` on a new local cluster (``scheduler`` None; ``workers``: its
-    precompute processes, default one per core; ``evaluate``: with evaluation workers)
+    precompute processes, default :func:`default_precompute_workers`; ``evaluate``:
+    with evaluation workers)
     or on the cluster at ``scheduler``. ``warm_up``: ``(job, scene)`` of
     ``evaluation_worker.warm_up``, which a local cluster's evaluation workers begin as
     they start (``worker_setup.WorkerSetup``).

@@ -44,6 +44,7 @@ from sweeps.distributed.cluster import (
     ClusterLost,
     check_scheduler,
     connect,
+    default_precompute_workers,
     local_gpus,
     lost_scheduler,
     watch_workers,
@@ -100,7 +101,7 @@ def dry_run(cfg: SweepConfig, workers: int | None = None) -> dict:
                          default=str) for p in cfg.points}
     from shacc_jax.runplan import bytes_per_rollout  # deferred: 1.3 s to import
 
-    n_workers = workers or os.cpu_count() or 1
+    n_workers = workers or default_precompute_workers()
     gpus = local_gpus()
     platform = "gpu" if gpus else "cpu"
     chunk = max(1, min(cfg.chunk, n))
@@ -135,7 +136,8 @@ def run_sweep(cfg: SweepConfig, out: Path, cache: Path | None = None,
               scheduler: str | None = None, lookahead: int = LOOKAHEAD) -> dict:
     """Run (or resume) a sweep into ``out``. ``cache``: the precompute cache folder, the
     same path on every worker host (default: each host's ``~/.cache/shacc/precompute``);
-    ``workers``: precompute processes of the local cluster (default: one per core);
+    ``workers``: precompute processes of the local cluster (default: three quarters
+    of the cores, ``cluster.default_precompute_workers``);
     ``scheduler``: an existing Dask cluster's address (default: the config's
     ``scheduler``, else a local cluster); ``lookahead``: scenes per precompute thread
     that may be precomputed ahead of the evaluation. Returns a summary (points, scenes,
