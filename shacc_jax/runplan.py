@@ -337,7 +337,7 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
     (every copy started before the first is waited for)."""
     geometry, params = jax.device_put((geometry, params), device)
     ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
-                            _EVALUATION_STRUCTURE, work=_work(geometry, params, layout))
+                            _EVALUATION_STRUCTURE, work=program_work(geometry, params, layout))
     return _copied_back({k: getattr(ev.rollouts, k) for k in fields})
 
 
@@ -349,7 +349,7 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
 RUN_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 64}
 
 
-def _work(geometry: Geometry, params: Params, layout: Layout) -> int:
+def program_work(geometry: Geometry, params: Params, layout: Layout) -> int:
     """The work of one evaluation program, in closed-form rollouts: points x scenes x
     starts x tasks (padding included) per mode, each weighted by its :data:`RUN_COST`
     (intent modes, stepped users, collision checks)."""
@@ -399,7 +399,7 @@ def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: L
     out = program_cache.call("evaluate-parts", _evaluate_parts,
                              {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
                              (geometry, params), tuple(fields),
-                             work=_work(geometry, params, layout))
+                             work=program_work(geometry, params, layout))
     return _copied_back(dict(zip(fields, out, strict=True)))
 
 

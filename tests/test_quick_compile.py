@@ -19,7 +19,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from shacc_jax import evaluation, program_cache
-from shacc_jax.runplan import RUN_COST, _work
+from shacc_jax.runplan import RUN_COST, program_work
 from shacc_jax.types import inputs
 
 LEVEL = "xla_backend_optimization_level"
@@ -76,12 +76,12 @@ def test_a_programs_work_weighs_each_modes_rollouts_by_their_cost():
     b = bake(results)
     g, p, layout = inputs(b, ("baseline", "shacc"))
     S, N, T = g.starts.shape[0], g.starts.shape[1], g.task_mask.shape[1]
-    assert _work(g, p, layout) == S * N * T * 2
+    assert program_work(g, p, layout) == S * N * T * 2
     points = type(p)._make(np.stack([a, a, a]) for a in p)
-    assert _work(g, points, layout) == 3 * S * N * T * 2
+    assert program_work(g, points, layout) == 3 * S * N * T * 2
     g, p, layout = inputs(b, ("baseline", "blend"))
-    assert _work(g, p, layout) == S * N * T * (1 + RUN_COST["intent"])
+    assert program_work(g, p, layout) == S * N * T * (1 + RUN_COST["intent"])
     user = bake([precompute(load_scene(p), {"start_grid": [4, 3], "user_tremor": 0.01})
                  for p in shipped_scene_paths()[:2]])
     g, p, layout = inputs(user, ("baseline",))
-    assert layout.stepped_users and _work(g, p, layout) == S * N * T * RUN_COST["stepped"]
+    assert layout.stepped_users and program_work(g, p, layout) == S * N * T * RUN_COST["stepped"]
