@@ -25,15 +25,14 @@ if "SHACC_COMPILE_CACHE" not in os.environ:
     _COMPILED = tempfile.mkdtemp(prefix="shacc-test-compiled-")
     os.environ["SHACC_COMPILE_CACHE"] = _COMPILED
 sys.path.insert(0, str(Path(__file__).parent))  # the NumPy reference lives beside the tests
-# The suite's programs are compiled at XLA's backend optimisation level 0 (LLVM's passes
-# off), unless XLA_FLAGS names a level: its batches are small, so compiling is most of
-# its time (a stepped program of three scenes: 38-52 s at the default level, 17 s at
-# 0, on 2 cores). Every assertion holds a float to a tolerance and only exact things
-# exactly, so the answers are the same at either level; the recorded answers
-# (test_reference_answers) pass at both. Benchmarks and the commands keep the default.
-OPT_LEVEL = "--xla_backend_optimization_level"
-if OPT_LEVEL not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPT_LEVEL}=0".strip()
+# Each evaluation program is compiled with the options the commands would give it
+# (shacc_jax.program_cache.quick: LLVM's passes off for a small CPU program, XLA's
+# defaults for a large one); tests that call shacc_jax.evaluate directly go through
+# programs.evaluate for the same rule. Forcing level 0 on every program made the large
+# ones run ten times slower than they took to compile (the collision test's 104-scene
+# batch: 61 s of running at level 0). Every assertion holds a float to a tolerance and
+# only exact things exactly, and the answers are the same bits at either level
+# (test_quick_compile).
 
 # Strict JAX, as the anchors' test suites run: no implicit rank promotion, no implicit
 # dtype promotion, and two CPU devices so that the multi-device paths run on a CI

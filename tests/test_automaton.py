@@ -8,12 +8,14 @@ from dataclasses import replace
 
 import jax
 import numpy as np
+import programs
 import pytest
 from reference_automaton import OUTCOME_NAMES, rollout
 from scipy.spatial.transform import Rotation
 
 import shacc_jax
 from geometry_precompute import bake, extra_scene_paths, load_scene, precompute
+from shacc_jax import program_cache
 from shacc_jax.types import INVALID, SUCCESS, Geometry
 
 
@@ -25,7 +27,7 @@ def run(baked, modes=shacc_jax.MODES, x64=False, meta=None, **layout):
         g, p, lay = shacc_jax.inputs(baked, modes, np.float64 if x64 else np.float32)
         if meta is not None:
             layout["meta_formula"] = meta
-        ev = shacc_jax.evaluate(g, p, replace(lay, **layout))
+        ev = programs.evaluate(g, p, replace(lay, **layout))
         return jax.tree.map(np.asarray, ev)
 
 
@@ -227,10 +229,10 @@ def test_points_axis_equals_one_call_per_point(shipped_results):
         v_max=points.v_max * np.array([[1.0], [0.5], [2.0]], points.v_max.dtype),
         ambiguity_nearest=np.array([[False] * 2, [True] * 2, [False, True]]),
         omega_max=points.omega_max * np.array([[1.0], [1.0], [0.3]], points.omega_max.dtype))
-    together = jax.tree.map(np.asarray, shacc_jax.evaluate(g, points, layout))
+    together = jax.tree.map(np.asarray, programs.evaluate(g, points, layout))
     assert together.rollouts.outcome.shape == (3, 2, 3, b.n_starts, b.n_tasks)
     for i in range(3):
-        alone = shacc_jax.evaluate(g, jax.tree.map(lambda a, i=i: a[i], points), layout)
+        alone = programs.evaluate(g, jax.tree.map(lambda a, i=i: a[i], points), layout)
         for x, y in zip(jax.tree.leaves(alone), jax.tree.leaves(together), strict=True):
             x, y = np.asarray(x), y[i]
             if x.dtype.kind == "f":
@@ -245,10 +247,12 @@ def test_evaluate_is_traceable(shipped_results):
     """No host reads of array values inside: evaluate runs under an outer jit and lowers
     ahead of time, with the same results."""
     g, p, layout = shacc_jax.inputs(bake(shipped_results[:2]), ("baseline", "shacc"))
-    direct = shacc_jax.evaluate(g, p, layout)
-    wrapped = jax.jit(lambda g, p: shacc_jax.evaluate(g, p, layout).metrics.u_scene)(g, p)
+    direct = programs.evaluate(g, p, layout)
+    quick = program_cache.QUICK_OPTIONS  # a small program, compiled as the commands would
+    wrapped = jax.jit(lambda g, p: shacc_jax.evaluate(g, p, layout).metrics.u_scene,
+                      compiler_options=quick)(g, p)
     np.testing.assert_array_equal(np.asarray(wrapped), np.asarray(direct.metrics.u_scene))
-    compiled = shacc_jax.evaluate.lower(g, p, layout).compile()
+    compiled = shacc_jax.evaluate.lower(g, p, layout).compile(quick)
     np.testing.assert_array_equal(np.asarray(compiled(g, p).rollouts.outcome),
                                   np.asarray(direct.rollouts.outcome))
     with pytest.raises(ValueError, match="n_tasks"):

@@ -10,6 +10,7 @@ from dataclasses import replace
 import jax
 import jax.numpy as jnp
 import numpy as np
+import programs
 import pytest
 from reference_automaton import OUTCOME_NAMES, rollout
 from scipy.spatial.transform import Rotation
@@ -143,7 +144,7 @@ def test_every_intent_rollout_agrees_with_the_reference(scenes):
     with jax.enable_x64(True):
         g, p, lay = shacc_jax.inputs(baked, modes=INTENT, dtype=np.float64)
         assert lay.stepped_users and lay.intent_yaw  # mugs: ho's average in closed form
-        ev = jax.tree.map(np.asarray, shacc_jax.evaluate(g, p, replace(lay, lanes_per_block=40)))
+        ev = jax.tree.map(np.asarray, programs.evaluate(g, p, replace(lay, lanes_per_block=40)))
         ro = ev.rollouts
         kinds = {"none": 0, "scene": 0, "correct": 0, "wrong": 0}
         for s in range(len(perfect) + len(every)):

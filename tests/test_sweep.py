@@ -117,11 +117,13 @@ def test_tables_and_values(finished):
                                       "assist_wrong"]
     assert json.loads((out / "config.json").read_text())["hash"] == cfg.hash()
     # A row against a direct evaluation of the same scene and settings.
+    import programs
+
     import shacc_jax
 
     scene = random_scene(5 + 1, "gaussian", 3, 3)
     r = precompute(scene, scene.settings(overrides={"v_max": 0.3, "start_grid": [2, 2]}))
-    ev = shacc_jax.evaluate(*shacc_jax.inputs(bake([r])))
+    ev = programs.evaluate(*shacc_jax.inputs(bake([r])))
     row = scenes[(scenes.point == 1) & (scenes.scene_index == 1)].iloc[0]
     for m, mode in enumerate(shacc_jax.MODES):
         assert row[f"{mode}.success"] == pytest.approx(float(ev.metrics.u_scene[0, m]))

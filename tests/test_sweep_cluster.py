@@ -64,17 +64,19 @@ def test_padded_shapes_change_no_result():
     rollouts of its own smallest batch."""
     import dataclasses
 
+    import programs
+
     import shacc_jax
     from geometry_precompute.baking import concatenate
 
     results = [precompute(s, s.settings(overrides={"start_grid": [2, 3]}))
                for s in (random_scene(7, "uniform", 3, 4), random_scene(8, "gaussian", 3, 4))]
-    own = shacc_jax.evaluate(*shacc_jax.inputs(bake(results)))
+    own = programs.evaluate(*shacc_jax.inputs(bake(results)))
     padded = concatenate([bake(results[:1], 6, max_objects=7),
                           bake(results[1:], 6, max_objects=7)], pad_to=4)
     g, p, layout = shacc_jax.inputs(padded)
     assert layout.meta_formula == "yaw" and layout.n_objects == 7 and g.task_mask.shape == (4, 6)
-    wide = shacc_jax.evaluate(g, p, dataclasses.replace(layout, meta_formula="both"))
+    wide = programs.evaluate(g, p, dataclasses.replace(layout, meta_formula="both"))
     T = own.rollouts.outcome.shape[-1]
     for a, b in zip(own.rollouts, wide.rollouts, strict=True):
         a, b = np.asarray(a), np.asarray(b)[:2, :, :, :T]

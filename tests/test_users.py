@@ -13,6 +13,7 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 import numpy as np
+import programs
 import pytest
 from reference_automaton import OUTCOME_NAMES, User, rollout, turn_across
 from scipy import stats
@@ -65,7 +66,7 @@ def reference_user(overrides: dict, values, steps, once, n: int, t: int):
 def _evaluate(baked, x64=False, **layout):
     with jax.enable_x64(x64):
         g, p, lay = shacc_jax.inputs(baked, dtype=np.float64 if x64 else np.float32)
-        ev = shacc_jax.evaluate(g, p, replace(lay, **layout))
+        ev = programs.evaluate(g, p, replace(lay, **layout))
         return jax.tree.map(np.asarray, ev)
 
 
