@@ -139,18 +139,28 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
     call.
     """
     leaves, in_tree = jax.tree.flatten(args)
-    options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
     if _DIR is None:
-        if options is None:
-            return jitted(*args, **static)
-        fast = _QUICK.get(name)
-        if fast is None:
-            fast = _QUICK[name] = jax.jit(jitted.__wrapped__,  # type: ignore[attr-defined]
-                                          static_argnames=tuple(static),
-                                          compiler_options=options)
-        return fast(*args, **static)
+        return compiled_as(name, jitted, tuple(static), work, leaves)(*args, **static)
+    options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
     run = _loaded(_DIR, name, jitted, static, in_tree, leaves, options)
     return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
+
+
+def compiled_as(name: str, jitted: Callable, static_names: tuple[str, ...],
+                work: int | None, leaves: list) -> Callable:
+    """The jitted function that a call of ``work`` on the arguments ``leaves`` runs
+    when no cache folder is set: ``jitted`` itself, or for a program that
+    :func:`quick` picks, the same function compiled with :data:`QUICK_OPTIONS` (one per
+    ``name`` and process). :func:`call` uses it; so does code that calls a jitted
+    function itself and wants the commands' choice of compiler options."""
+    if work is None or not quick(work, leaves):
+        return jitted
+    fast = _QUICK.get(name)
+    if fast is None:
+        fast = _QUICK[name] = jax.jit(jitted.__wrapped__,  # type: ignore[attr-defined]
+                                      static_argnames=static_names,
+                                      compiler_options=QUICK_OPTIONS)
+    return fast
 
 
 def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,

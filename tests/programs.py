@@ -4,7 +4,8 @@ The commands choose each program's compiler options by its size
 (``shacc_jax.program_cache.quick``): a small CPU program compiles with LLVM's passes
 off, a large one with XLA's defaults (it would otherwise run ten times slower than it
 took to compile). A test that calls ``shacc_jax.evaluate`` itself gets the same rule
-here, so its time goes where a user's would."""
+here (``program_cache.compiled_as``, as the commands' ``program_cache.call``), so its
+time goes where a user's would."""
 
 from __future__ import annotations
 
@@ -14,12 +15,10 @@ import shacc_jax
 from shacc_jax import program_cache
 from shacc_jax.runplan import program_work
 
-_QUICK = jax.jit(shacc_jax.evaluate.__wrapped__, static_argnames="layout",
-                 compiler_options=program_cache.QUICK_OPTIONS)
-
 
 def evaluate(geometry, params, layout):
     """``shacc_jax.evaluate``, compiled at the level the commands would choose."""
     work = program_work(geometry, params, layout)
-    quick = program_cache.quick(work, jax.tree.leaves((geometry, params)))
-    return (_QUICK if quick else shacc_jax.evaluate)(geometry, params, layout)
+    run = program_cache.compiled_as("evaluate", shacc_jax.evaluate, ("layout",), work,
+                                    jax.tree.leaves((geometry, params)))
+    return run(geometry, params, layout=layout)
