@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE ?= geometry_precompute/scenes/09_mug_behind_two.toml
 
-.PHONY: demo test lint bench clean notebooks docs
+.PHONY: demo test test-all lint bench clean notebooks docs
 
 $(BIN)/shacc: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -15,10 +15,21 @@ $(BIN)/shacc: pyproject.toml
 demo: $(BIN)/shacc
 	$(BIN)/shacc evaluate $(SCENE)
 
+# `make test` leaves out the tests marked slow: each is a heavier case of what a faster
+# test also checks (tests/test_slow_twins.py holds them to that); `make test-all` runs
+# every test.
+# Two processes (CI has two cores), a file each: its module fixtures run once.
+PYTEST := $(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=25
+
 test: $(BIN)/shacc
 	$(BIN)/ruff check .
 	$(BIN)/mypy  # the three packages, as pyproject's [tool.mypy] says
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=25  # two processes (CI has two cores), a file each: its module fixtures run once
+	$(PYTEST) -m "not slow"
+
+test-all: $(BIN)/shacc
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+	$(PYTEST)
 
 bench: $(BIN)/shacc
 	$(BIN)/python benchmarks/bench_precompute.py

@@ -465,13 +465,19 @@ def test_objects_are_the_exported_mjcf_geoms(shipped_results):
     assert 0.2 < np.mean(decided) < 0.8  # both kinds of pose are well represented
 
 
+@pytest.mark.slow
 def test_collision_rollouts_agree_on_extra_and_random_scenes(mesh_scenes):
     """The extra scenes (a tray, a box, among mugs: every third start) and 100 random scenes
     with mesh objects (3 to 6 tasks, half uniform, half gaussian: every task in every
     mode from one start per scene) against the NumPy Automaton with CPU MuJoCo
     collisions on each scene's exported MJCF (a mesh as MuJoCo takes it: its convex
     hull): at least 99.9 % of the rollouts identical in outcome and step, no
-    penetration deeper than 1 mm missed, and collisions with meshes among them."""
+    penetration deeper than 1 mm missed, and collisions with meshes among them.
+
+    Faster twin: tests/test_collision.py::test_collision_rollouts_agree_with_reference,
+    tests/test_mesh_collisions.py::test_gripper_near_meshes_agrees_with_cpu_mujoco (the
+    rollouts against the same reference on three shipped scenes; the gripper against
+    MuJoCo near meshes, pose by pose)."""
     from geometry_precompute import extra_scene_paths, load_scene
     from geometry_precompute.mjcf import scene_to_mjcf
 

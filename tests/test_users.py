@@ -346,11 +346,17 @@ def test_a_rollouts_noise_does_not_depend_on_its_batch_or_mode(scenes):
         assert np.array_equal(ev.rollouts.point[i, 0], ev.rollouts.point[i, 1])
 
 
+@pytest.mark.slow
 def test_the_perfect_user_stepped_with_collision_checks_is_the_closed_form(scenes):
     """With collision checks on (against primitives and, in the last scene, meshes), a
     perfect user's stepped lanes collide where, and only where, the closed form's lane
     pass finds a penetration: the same outcomes, steps and meta steps in every mode, and
-    points and path lengths to float32 rounding (as without collision checks)."""
+    points and path lengths to float32 rounding (as without collision checks).
+
+    Faster twin: tests/test_users.py::test_the_perfect_user_stepped_is_the_closed_form,
+    tests/test_users.py::test_stepped_users_agree_with_the_reference (the perfect user
+    stepped against the closed form without collision checks; stepped users with
+    collision checks against the reference, rollout for rollout)."""
     baked = _bake(scenes, {"collision": "on"})
     assert baked.obj_hull.shape[2] > 0
     closed = _evaluate(baked)
