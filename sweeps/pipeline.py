@@ -89,7 +89,8 @@ class Evaluated:
 
 
 def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
-                     max_tasks: int | None = None, found: Search | None = None) -> Evaluated:
+                     max_tasks: int | None = None, found: Search | None = None,
+                     budget_bytes: int | None = None) -> Evaluated:
     """Bake and evaluate precomputed scenes in one batch: what ``shacc evaluate`` does.
 
     :param results: S precomputed scenes (``geometry_precompute.precompute``).
@@ -97,6 +98,8 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
         first), in the order of the result's mode axis.
     :param max_tasks: pad the task axis to at least this.
     :param found: a search already run for these scenes (the optimized mode reuses it).
+    :param budget_bytes: the memory the evaluation may use (default: the machine's
+        budget, ``shacc_jax.budget()``); a part of it where evaluations run side by side.
     :returns: an :class:`Evaluated` holding NumPy arrays: ``evaluation.rollouts``
         fields of shape (S, M, N, T), ``evaluation.metrics`` of shape (S, M), the bake
         (``baked.starts`` (S, N, 7)), the timings and the provenance. Memory-bound
@@ -113,7 +116,7 @@ def evaluate_results(results: Sequence[PrecomputeResult], modes=shacc_jax.MODES,
     t0 = time.perf_counter()
     baked = bake(results, max_tasks)
     t1 = time.perf_counter()
-    out = shacc_jax.run(baked, modes, found=found)
+    out = shacc_jax.run(baked, modes, found=found, budget_bytes=budget_bytes)
     assert not isinstance(out.search, list)  # one search: no points axis here
     t2 = time.perf_counter()
     return Evaluated(list(results), baked, out.evaluation, tuple(modes),

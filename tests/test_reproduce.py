@@ -85,6 +85,11 @@ def test_report_figures_and_readme(quick_run):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = readme.read_text()
     assert "\nold\n" not in text and text.endswith("tail\n") and "Pearson" in text
+    # The last three stages ran side by side: each within the block's wall time.
+    t = json.loads((out / "summary.json").read_text())["timing_s"]
+    stages = [t["robustness"], t["intent"], t["success_fields"]]
+    assert min(stages) > 0 and max(stages) <= t["side_by_side"] <= t["total"]
+    assert f"then side by side in {t['side_by_side']:.1f} s" in report
 
 
 def test_robustness_section(quick_run):
@@ -178,3 +183,46 @@ def test_verdict_rule(diffs, expected):
 
     rows = [_row(i, d, ci) for i, (d, ci) in enumerate(diffs)]
     assert verdict(rows, "shacc") == expected
+
+
+def test_the_last_stages_run_side_by_side_and_say_the_first_error(monkeypatch):
+    """The robustness, intent and field stages run at once (each is mostly compiling):
+    two stages that each wait for the other finish only if they overlap; each gets an
+    equal share of the memory budget; a failed stage's error is raised after every
+    other stage has ended, the first in the stages' order."""
+    import threading
+    import time
+
+    import shacc_jax
+    from sweeps.app.reproduce_cmd import side_by_side
+
+    monkeypatch.setenv("SHACC_MEMORY_BUDGET", "1000M")
+    meet = threading.Barrier(2, timeout=30)
+    budgets = []
+
+    def meeting(name):
+        def stage(budget_bytes):
+            budgets.append(budget_bytes)
+            meet.wait()  # BrokenBarrierError if the other never runs alongside
+            return name
+        return stage
+
+    done = side_by_side({"a": meeting("a"), "b": meeting("b")})
+    assert {k: v[0] for k, v in done.items()} == {"a": "a", "b": "b"}
+    assert all(v[1] >= 0 for v in done.values())
+    assert budgets == [shacc_jax.budget() // 2] * 2 == [500 * 2**20] * 2
+
+    ended = []
+
+    def slow(_):
+        time.sleep(0.3)
+        ended.append("slow")
+
+    def fails(message):
+        def stage(_):
+            raise ValueError(message)
+        return stage
+
+    with pytest.raises(ValueError, match="first"):
+        side_by_side({"slow": slow, "one": fails("first"), "two": fails("second")})
+    assert ended == ["slow"]

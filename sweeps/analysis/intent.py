@@ -39,16 +39,19 @@ FIGURE_USER = "a change of mind in every approach"
 
 
 def run(results: Sequence[PrecomputeResult], n_boot: int, seed: int,
-        progress: Callable[[str], None] | None = None) -> dict:
+        progress: Callable[[str], None] | None = None,
+        budget_bytes: int | None = None) -> dict:
     """The section's numbers (``summary.json``'s ``intent``): {"modes": [...], "users":
     {user: {"settings": {...}, "modes": {mode: {"u_scene", "delta_R", "assist": {kind:
-    ci}}}, "sentences": [...]}}, "n_scenes": S}."""
+    ci}}}, "sentences": [...]}}, "n_scenes": S}. ``budget_bytes``: the evaluation's memory
+    budget (``evaluate_results``)."""
     batch = [replace(r, settings=r.settings.with_overrides({**PERFECT, **over}))
              for over in USERS.values() for r in results]
     if progress:
         progress(f"intent inference: {len(results)} scenes x {len(USERS)} users in "
                  f"{', '.join(MODES)} (one batch)...")
-    ev = evaluate_results(batch, MODES, max_tasks=max(len(r.spaces) for r in results))
+    ev = evaluate_results(batch, MODES, max_tasks=max(len(r.spaces) for r in results),
+                          budget_bytes=budget_bytes)
     me = ev.evaluation.metrics
     S = len(results)
     out: dict[str, Any] = {"modes": list(MODES), "n_scenes": S, "users": {}}

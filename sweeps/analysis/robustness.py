@@ -119,11 +119,12 @@ def sentence(param: str, rows: list[dict]) -> str:
 
 def run(results: list[PrecomputeResult], found: Search, modes: Sequence[str],
         perfect_u: np.ndarray, perfect_delta_r: np.ndarray, n_boot: int, seed: int,
-        quick: bool = False, progress=None) -> dict:
+        quick: bool = False, progress=None, budget_bytes: int | None = None) -> dict:
     """The robustness section: per parameter {"rows": [...], "verdict": {mode: ...},
     "sentence": ...}; rows[0] is the perfect user (``perfect_u``, ``perfect_delta_r``:
     the main evaluation's per-scene metrics (S, M)), or for a parameter in WITH that
-    parameter's perfect value beside the WITH settings."""
+    parameter's perfect value beside the WITH settings. ``budget_bytes``: the
+    evaluation's memory budget (``evaluate_results``)."""
     levels = QUICK_LEVELS if quick else LEVELS
     max_tasks = max(len(r.spaces) for r in results)
     # Every (parameter, level) evaluated, as copies of the scenes in one batch: one
@@ -141,7 +142,8 @@ def run(results: list[PrecomputeResult], found: Search, modes: Sequence[str],
              for param, value in cases for r in results]
     tiled = None if found is None else Search(*[
         np.concatenate([np.asarray(f)] * len(cases)) for f in found])
-    me = evaluate_results(users, modes, max_tasks=max_tasks, found=tiled).evaluation.metrics
+    me = evaluate_results(users, modes, max_tasks=max_tasks, found=tiled,
+                          budget_bytes=budget_bytes).evaluation.metrics
     S = len(results)
     u_all = np.asarray(me.u_scene).reshape(len(cases), S, -1)
     dr_all = np.asarray(me.delta_R_mean).reshape(len(cases), S, -1)

@@ -20,7 +20,9 @@ import importlib.metadata as md
 import os
 import platform
 import sys
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from tqdm import tqdm
 
+import shacc_jax
 from geometry_precompute import (
     DEFAULTS,
     InputError,
@@ -75,7 +78,43 @@ _BEGUN = time.perf_counter()
 def _log(*parts) -> None:
     """Progress lines go to stderr (stdout is kept for results), each with the seconds
     since the command began, so that a slow stage shows where it is."""
-    print(f"[{time.perf_counter() - _BEGUN:6.1f} s]", *parts, file=sys.stderr, flush=True)
+    # One write per line: the last stages log from their threads at once.
+    line = " ".join([f"[{time.perf_counter() - _BEGUN:6.1f} s]", *map(str, parts)])
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
+
+
+def side_by_side(stages: dict[str, Callable[[int], Any]]) -> dict[str, tuple[Any, float]]:
+    """Run independent stages at once, one thread each, every one given an equal share
+    of the memory budget (``shacc_jax.budget()``): ``{name: (result, seconds)}``; the
+    first stage's error (in ``stages``' order) is raised once all have ended.
+
+    The stages are mostly compilation: JAX traces under the GIL, but XLA compiles and
+    runs without it, so stages overlap on a machine with a free core (docs/DECISIONS.md,
+    "The reproduction's last stages side by side"). Progress lines come from each as it
+    goes. Ctrl-C still ends the command at once (``sweeps.distributed.interrupt``)."""
+    share = max(1, shacc_jax.budget() // max(1, len(stages)))
+    done: dict[str, tuple[Any, float]] = {}
+    failed: dict[str, BaseException] = {}
+
+    def work(name: str, stage: Callable[[int], Any]) -> None:
+        t0 = time.perf_counter()
+        try:
+            done[name] = (stage(share), time.perf_counter() - t0)
+            _log(f"  {name}: done in {done[name][1]:.1f} s")
+        except BaseException as e:  # raised in the calling thread below
+            failed[name] = e
+
+    threads = [threading.Thread(target=work, args=item, name=f"reproduce {item[0]}",
+                                daemon=True) for item in stages.items()]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for name in stages:
+        if name in failed:
+            raise failed[name]
+    return done
 
 
 def _optimized_clutteredness(r: PrecomputeResult, q: np.ndarray) -> float:
@@ -198,31 +237,41 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         categories[c] = entry
     t_stats = time.perf_counter()
 
+    # The robustness, intent and field stages need nothing of one another: they run side
+    # by side (side_by_side), each with its share of the memory budget.
+    stages: dict[str, Callable[[int], Any]] = {}
     if settings["collision"] == "off":
-        _log("robustness: the experiment with imperfect simulated users...")
-        robust: dict[str, Any] = robustness.run(
-            results, found, MODES, np.asarray(me.u_scene), np.asarray(me.delta_R_mean),
-            n_boot, seed, quick, progress=_log)
-    else:  # collision checks take the perfect user only
-        robust = {}
-    t_robust = time.perf_counter()
-    # The paper's open question, on its random scenes.
-    intent_section = intent.run(results[len(manual):], n_boot, seed, progress=_log) \
-        if n_random else {}
-    t_intent = time.perf_counter()
+        def robust_stage(budget_bytes: int) -> dict:
+            _log("robustness: the experiment with imperfect simulated users...")
+            return robustness.run(
+                results, found, MODES, np.asarray(me.u_scene), np.asarray(me.delta_R_mean),
+                n_boot, seed, quick, progress=_log, budget_bytes=budget_bytes)
+        stages["robustness"] = robust_stage
+    if n_random:  # the paper's open question, on its random scenes
+        stages["intent"] = lambda budget_bytes: intent.run(
+            results[len(manual):], n_boot, seed, progress=_log, budget_bytes=budget_bytes)
 
-    _log(f"success fields on a {field_grid} x {field_grid} start grid...")
     field_idx = next(i for i, s in enumerate(scenes) if s["name"] == "mug-behind-two")
     fr = results[field_idx]
-    field_settings = fr.settings.with_overrides({"start_grid": [field_grid, field_grid]})
-    # The optimized spaces of the tables (the search is not run again for the field).
-    T = len(fr.spaces)
-    field_search = Search._make(a[field_idx:field_idx + 1, :T] if a.ndim == 3
-                                else a[field_idx:field_idx + 1] for a in found)
-    field = evaluate_results([precompute(fr.scene, field_settings)],
-                             ("baseline", "shrinking", "shacc", "optimized"),
-                             found=field_search)
-    t_field = time.perf_counter()
+
+    def field_stage(budget_bytes: int):
+        _log(f"success fields on a {field_grid} x {field_grid} start grid...")
+        field_settings = fr.settings.with_overrides({"start_grid": [field_grid, field_grid]})
+        # The optimized spaces of the tables (the search is not run again for the field).
+        T = len(fr.spaces)
+        field_search = Search._make(a[field_idx:field_idx + 1, :T] if a.ndim == 3
+                                    else a[field_idx:field_idx + 1] for a in found)
+        return evaluate_results([precompute(fr.scene, field_settings)],
+                                ("baseline", "shrinking", "shacc", "optimized"),
+                                found=field_search, budget_bytes=budget_bytes)
+    stages["success fields"] = field_stage
+    t_side = time.perf_counter()
+    done = side_by_side(stages)
+    t_done = time.perf_counter()
+    robust: dict[str, Any] = done["robustness"][0] if "robustness" in done else {}
+    intent_section = done["intent"][0] if "intent" in done else {}
+    field = done["success fields"][0]
+    seconds = {name: t for name, (_, t) in done.items()}
 
     summary: dict[str, Any] = {
         "correlation": correlation,
@@ -238,8 +287,12 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         "intent": intent_section,
         "claims": claims.check(scenes, correlation, n_boot, seed),
         "timing_s": {"precompute": t_pre - t_start, "evaluate": t_eval - t_pre,
-                     "statistics": t_stats - t_eval, "robustness": t_robust - t_stats,
-                     "intent": t_intent - t_robust, "success_fields": t_field - t_intent},
+                     "statistics": t_stats - t_eval,
+                     # the last stages' wall time, and each one's own seconds
+                     "side_by_side": t_done - t_side,
+                     "robustness": seconds.get("robustness", 0.0),
+                     "intent": seconds.get("intent", 0.0),
+                     "success_fields": seconds["success fields"]},
         "rollouts": n_rollouts,
     }
     _log("figures and report...")
@@ -488,7 +541,8 @@ def render_report(summary: dict) -> str:
         *robustness_section(summary),
         *intent_section(summary),
         f"Time: precompute {t['precompute']:.1f} s, evaluation {t['evaluate']:.1f} s, "
-        f"statistics {t['statistics']:.1f} s, robustness {t['robustness']:.1f} s, "
+        f"statistics {t['statistics']:.1f} s, then side by side in "
+        f"{t['side_by_side']:.1f} s: robustness {t['robustness']:.1f} s, "
         f"intent inference {t['intent']:.1f} s, "
         f"success fields {t['success_fields']:.1f} s.", "",
     ])
