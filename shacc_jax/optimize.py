@@ -389,20 +389,35 @@ def _search_groups(baked, scenes_per_call, population, generations, candidates) 
                  validation=np.zeros(S, dtype), validation_init=np.zeros(S, dtype),
                  validation_shrunk=np.zeros(S, dtype), winner=np.zeros(S, np.int32),
                  clutteredness=np.zeros(S, dtype))
+    pieces = []  # (task count, scenes of the call, scenes kept, the call's work)
     for n in np.unique(n_tasks):
         members = np.flatnonzero(n_tasks == n)
         per = len(members) if scenes_per_call is None else max(1, min(len(members),
                                                                       int(scenes_per_call)))
         for a in range(0, len(members), per):
             idx = members[np.minimum(np.arange(a, a + per), len(members) - 1)]
-            keep = members[a:a + per]
-            piece = (cut(geometry, idx, n), cut(params, idx, n), cut(problem, idx, n))
             # Its activation rollouts: each generation's population from the search starts,
             # then the candidates, Shrinking's and the initial sizes from the validation's.
             work = len(idx) * n * (population * generations * problem.opt_starts.shape[1]
                                    + (candidates + 2) * n_val)
-            found = program_cache.call("search", _search, static, piece, _SEARCH_STRUCTURE,
-                                       work=work)
+            pieces.append((int(n), idx, members[a:a + per], work))
+
+    def arrays(n, idx):
+        return cut(geometry, idx, n), cut(params, idx, n), cut(problem, idx, n)
+
+    # One program per task count: each group's first call stands for its program, and
+    # they all compile side by side while the first group runs.
+    firsts: dict[int, tuple] = {}
+    for n, idx, _, work in pieces:
+        firsts.setdefault(n, (idx, work))
+    with program_cache.ahead("search", _search, static,
+                             [(arrays(n, idx), work) for n, (idx, work) in firsts.items()]
+                             ) as compiled:
+        ready = dict(zip(firsts, compiled, strict=True))
+        for n, idx, keep, work in pieces:
+            ready[n].result()
+            found = program_cache.call("search", _search, static, arrays(n, idx),
+                                       _SEARCH_STRUCTURE, work=work)
             found = jax.tree.map(lambda x, keep=keep: np.asarray(x)[:len(keep)], found)
             out.q[keep, :n] = found.q
             for name in Search._fields[1:]:

@@ -16,9 +16,13 @@ a library user who never calls it traces as usual.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import hashlib
-from collections.abc import Callable
+import os
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +37,7 @@ _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
 _LOADED: dict[str, Callable] = {}  # key -> the deserialised program, jitted, this process
 _QUICK: dict[str, Callable] = {}  # name -> the jitted function compiled with QUICK_OPTIONS
+_QUICK_LOCK = threading.Lock()  # ahead()'s threads may ask for the same name at once
 
 # A CPU program whose work is at most this many closed-form rollouts (a stepped or an
 # intent mode's rollout counts as several: shacc_jax.runplan.RUN_COST) is compiled with
@@ -155,12 +160,64 @@ def compiled_as(name: str, jitted: Callable, static_names: tuple[str, ...],
     function itself and wants the commands' choice of compiler options."""
     if work is None or not quick(work, leaves):
         return jitted
-    fast = _QUICK.get(name)
-    if fast is None:
-        fast = _QUICK[name] = jax.jit(jitted.__wrapped__,  # type: ignore[attr-defined]
-                                      static_argnames=static_names,
-                                      compiler_options=QUICK_OPTIONS)
+    with _QUICK_LOCK:
+        fast = _QUICK.get(name)
+        if fast is None:
+            fast = _QUICK[name] = jax.jit(jitted.__wrapped__,  # type: ignore[attr-defined]
+                                          static_argnames=static_names,
+                                          compiler_options=QUICK_OPTIONS)
     return fast
+
+
+@contextlib.contextmanager
+def ahead(name: str, jitted: Callable, static: dict,
+          calls: Sequence[tuple[tuple, int | None]]) -> Iterator[list[Future]]:
+    """Compile, side by side in threads, the programs that ``call(name, jitted,
+    static, args, ..., work=work)`` will run for each ``(args, work)`` of ``calls``.
+
+    Yields one future per call, done when that call's program is compiled (calls of
+    one program share it): wait for it, then make the call, which finds the program
+    ready, so that a batch that needs several programs (the optimized mode's search,
+    one per task count) compiles them together and runs the first while the others
+    still compile. The programs are the ones :func:`call` would compile (the same
+    options, through the exported cache when a folder is set), so nothing changes but
+    when they compile. A compilation's error is raised by its future. On leaving,
+    compilations not yet begun are cancelled and the running ones awaited.
+
+    The threads take the caller's ``jax_enable_x64`` (a thread-local setting)."""
+    flags: Any = jax.config  # its flags are attributes that type checkers do not see
+    x64 = bool(flags.jax_enable_x64)
+
+    def compile_one(args: tuple, work: int | None) -> None:
+        with jax.enable_x64(x64):
+            leaves, in_tree = jax.tree.flatten(args)
+            program: Any
+            if _DIR is None:
+                program = compiled_as(name, jitted, tuple(static), work, leaves)
+                program.lower(*args, **static).compile()
+            else:
+                options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
+                program = _loaded(_DIR, name, jitted, static, in_tree, leaves, options)
+                program.lower(*leaves).compile()
+
+    signatures = []
+    for args, work in calls:
+        leaves, in_tree = jax.tree.flatten(args)
+        signatures.append((str(in_tree), *(f"{tuple(x.shape)}:{x.dtype}" for x in leaves),
+                           work is not None and quick(work, leaves)))
+    distinct = list(dict.fromkeys(signatures))
+    pool = ThreadPoolExecutor(max(1, min(len(distinct), os.cpu_count() or 1)),
+                              thread_name_prefix=f"compile-{name}")
+    futures: dict[tuple, Future] = {}
+    try:
+        for sig, (args, work) in zip(signatures, calls, strict=True):
+            if sig not in futures:
+                futures[sig] = pool.submit(compile_one, args, work)
+        yield [futures[sig] for sig in signatures]
+    finally:
+        for f in futures.values():
+            f.cancel()
+        pool.shutdown(wait=True)
 
 
 def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,

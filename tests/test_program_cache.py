@@ -1,10 +1,15 @@
 """The exported-program cache gives the same evaluation as the plain jit, survives a
-damaged entry, and keys on shapes (a new shape is a new entry)."""
+damaged entry, and keys on shapes (a new shape is a new entry); ``ahead`` compiles a
+list of calls' programs side by side, once each."""
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
+import jax.numpy as jnp
 import numpy as np
+import pytest
 from conftest import memory_maps
 
 import shacc_jax
@@ -129,3 +134,49 @@ def test_released_programs_give_back_their_memory_maps(shipped_results):
             np.testing.assert_array_equal(a, b)
     assert released[0] - before < (held - before) / 2
     assert max(released) - min(released) < 60, released
+
+
+@partial(jax.jit, static_argnames=("k",))
+def scaled_dot(x, y, k):
+    if x.shape[0] == 5:
+        raise ValueError("five rows are refused")  # at trace time, in ahead()'s thread
+    return {"dot": jnp.sum(x * y) * k}
+
+
+@pytest.mark.parametrize("exported", [False, True])
+def test_ahead_compiles_each_program_once_side_by_side(tmp_path, exported):
+    """ahead() compiles every distinct program of a list of calls in threads, in the
+    caller's x64 mode; the calls that follow compile nothing; a trace's error is raised
+    by its own future only."""
+    compiles = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    previous = program_cache.get_dir()
+    program_cache.set_dir(tmp_path if exported else None)
+    program_cache.forget_loaded()
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    rng = np.random.default_rng(0)
+    calls = [(rng.random((n, 3)), rng.random((n, 3))) for n in (2, 4, 2, 5)]
+    try:
+        with jax.enable_x64(True):
+            with program_cache.ahead("ahead-test", scaled_dot, {"k": 3},
+                                     [(args, None) for args in calls]) as ready:
+                assert len(ready) == 4 and ready[0] is ready[2]  # one program, one future
+                for f in ready[:3]:
+                    f.result()
+                with pytest.raises(ValueError, match="five rows"):
+                    ready[3].result()
+            assert len(compiles) == 2
+            got = [program_cache.call("ahead-test", scaled_dot, {"k": 3}, args, {"dot": 0})
+                   for args in calls[:3]]
+        assert len(compiles) == 2  # the calls found their programs compiled
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+        program_cache.set_dir(previous)
+        program_cache.forget_loaded()
+    for (x, y), out in zip(calls, got, strict=False):
+        assert out["dot"].dtype == np.float64  # compiled in x64, as the caller runs
+        np.testing.assert_allclose(out["dot"], 3 * np.sum(x * y), rtol=1e-12)

@@ -163,8 +163,8 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     results = _precompute(items, workers)
     t_pre = time.perf_counter()
     counts = sorted({len(r.spaces) for r in results})
-    _log(f"evaluating all rollouts; the optimized mode's search first, one program per task "
-         f"count ({', '.join(map(str, counts))}), each compiled on first use...")
+    _log(f"evaluating all rollouts: the paper's modes, then the optimized mode's search (one "
+         f"program per task count, {', '.join(map(str, counts))}, compiled side by side)...")
     ev = evaluate_results(results, MODES, max_tasks=max(len(r.spaces) for r in results))
     me = ev.evaluation.metrics
     n_rollouts = int(me.n_rollouts.sum())
