@@ -16,6 +16,7 @@ import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from . import batch_cache
 from .baking import bake
 from .cache import cached, default_folder
 from .errors import SceneWarning
@@ -55,6 +56,12 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
     t0 = time.perf_counter()
     folder = Path(cache) if cache else default_folder()
     settings = point_settings(points)
+    key = batch_cache.batch_key(refs, points, tasks, objects, settings)
+    kept = batch_cache.read(folder, key, len(refs), len(points))
+    if kept is not None:  # this very task ran before: its arrays, nothing baked
+        bakes, scenes, said_before = kept
+        return Batch(bakes, scenes, 0, len(refs), time.perf_counter() - t0,
+                     scene_warnings=said_before)
     got, warning = [], None
     said: dict[str, None] = {}
     for ref in refs:
@@ -72,6 +79,8 @@ def precompute_batch(refs, points: list[dict], cache: str | None, tasks: int,
         got.append((r, hit))
         warning = warning or why
     batch = bake_batch(got, points, tasks, objects, time.perf_counter() - t0, settings)
+    if warning is None:  # where scenes could not be stored, neither can the batch
+        warning = batch_cache.store_quietly(folder, key, batch.bakes, batch.scenes, tuple(said))
     return replace(batch, cache_warning=warning, scene_warnings=tuple(said))
 
 

@@ -328,3 +328,51 @@ def test_cached_start_draws_equal_the_generator():
                 s["start_grid"][0] * 3, rng=np.random.default_rng(s["seed"])).as_matrix())
         assert np.array_equal(optimize_start_poses(sc, s), np.concatenate([pts, q], 1))
         assert np.array_equal(start_orientations(s), q0)
+
+
+def test_a_precompute_task_keeps_its_batch_as_arrays(tmp_path, monkeypatch):
+    """A precompute task's second run reads its bakes from one array file of the cache,
+    the same bits as the first run's, without the scenes' entries (nor any bake); a
+    damaged or foreign file is a miss and is written again; other points, another
+    key."""
+    import geometry_precompute.batch as batch
+    from geometry_precompute import load_scene, shipped_scene_paths
+
+    refs = [(3, "uniform", 3, 4), (4, "gaussian", 3, 4), load_scene(shipped_scene_paths()[0])]
+    points = [{}, {"v_max": 0.3}]
+
+    def run(pts=points):
+        return batch.precompute_batch(refs, pts, str(tmp_path), 4, 4)
+
+    first = run()
+    assert (first.precomputed, first.cache_hits) == (3, 0)
+    (entry,) = tmp_path.glob("batch-*.npz")
+    for scene_entry in tmp_path.glob("*.json"):
+        scene_entry.unlink()
+    monkeypatch.setattr(batch, "bake_batch", None)  # baking would fail now
+    again = run()
+    assert (again.precomputed, again.cache_hits) == (0, 3)
+    assert again.scenes == first.scenes and again.scene_warnings == first.scene_warnings
+    for a, b in zip(first.bakes, again.bakes, strict=True):
+        assert a.arrays().keys() == b.arrays().keys()
+        for k, x in a.arrays().items():
+            y = b.arrays()[k]
+            assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), k
+        assert a.labels["names"] == b.labels["names"]
+        assert a.labels["task_ids"] == b.labels["task_ids"]
+        assert a.labels["C_init"].tolist() == b.labels["C_init"].tolist()
+    assert again.bakes[1].v_max.tolist() == [0.3] * 3  # each point its own bake
+    monkeypatch.undo()
+
+    good = entry.read_bytes()
+    for damaged in (good[:len(good) // 2], good[:-1] + bytes([good[-1] ^ 1])):
+        entry.write_bytes(damaged)
+        for scene_entry in tmp_path.glob("*.json"):
+            scene_entry.unlink()
+        assert run().precomputed == 3  # a miss: without the scenes' entries, computed
+        assert entry.read_bytes() == good
+    other = run([{"omega_max": 1.0}])
+    assert other.precomputed == 0 and len(list(tmp_path.glob("batch-*.npz"))) == 2
+    foreign = next(p for p in tmp_path.glob("batch-*.npz") if p != entry)
+    entry.write_bytes(foreign.read_bytes())  # another key's entry under this name
+    assert run().precomputed == 0 and entry.read_bytes() == good  # rebuilt from the scenes
