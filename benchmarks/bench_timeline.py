@@ -36,11 +36,11 @@ def main() -> None:
 
         start_fork_server()
     from sweeps.config import load_config
-    from sweeps.distributed import cluster
+    from sweeps.distributed import runner
     from sweeps.distributed.runner import run_sweep
 
     seen: dict = {}
-    connect = cluster.connect
+    connect = runner.connect
 
     @contextlib.contextmanager
     def recorded(*a, **k):
@@ -57,7 +57,7 @@ def main() -> None:
                 n_workers=-1)["workers"].items() if "evaluate" in w["resources"]]
             seen["marks"] = pool.client.run(_warm_up_marks, workers=seen["evaluators"])
 
-    cluster.connect = recorded
+    runner.connect = recorded  # the name the runner calls
     summary = run_sweep(load_config(args.config), Path(args.out),
                         Path(args.cache) if args.cache else None, args.workers,
                         progress=False, scheduler=args.scheduler)
