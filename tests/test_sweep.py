@@ -203,6 +203,26 @@ def test_rerun_is_a_no_op(finished):
     assert not any(p.exists() for p in stale)
 
 
+def test_the_same_sweep_again_reads_its_batch_files(finished, tmp_path):
+    """A later sweep of the same config reads each precompute task's bakes from its
+    batch file, without the scenes' own entries, and writes the same tables."""
+    cfg, out, cache, _ = finished
+    assert list(cache.glob("batch-*.npz"))
+    aside = tmp_path / "entries"
+    aside.mkdir()
+    for p in cache.glob("*.json"):  # the scenes' entries, out of the way
+        p.rename(aside / p.name)
+    try:
+        s = run_sweep(cfg, tmp_path / "again", cache, workers=1, progress=False)
+    finally:
+        for p in aside.iterdir():
+            p.rename(cache / p.name)
+    assert s["precomputed"] == 0 and s["precompute_cache_hits"] == 3
+    for table in ("scenes", "rollouts"):
+        pd.testing.assert_frame_equal(pd.read_parquet(out / table),
+                                      pd.read_parquet(tmp_path / "again" / table))
+
+
 def test_rollout_setting_reuses_the_cache(finished, tmp_path):
     _, _, cache, _ = finished
     cfg = load_config(write(tmp_path, CONFIG.replace("v_max = [0.15, 0.3]",
