@@ -132,6 +132,13 @@ def quick(work: int, leaves: list) -> bool:
     return jax.default_backend() == "cpu"
 
 
+def _options(work: int | None, leaves: list) -> dict | None:
+    """The compiler options of a program of ``work`` on the device of ``leaves``:
+    :data:`QUICK_OPTIONS` where :func:`quick` picks it, else None (XLA's defaults; also
+    for ``work`` None)."""
+    return QUICK_OPTIONS if work is not None and quick(work, leaves) else None
+
+
 def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
          work: int | None = None):
     """``jitted(*args, **static)`` through the exported program cache.
@@ -146,8 +153,7 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
     leaves, in_tree = jax.tree.flatten(args)
     if _DIR is None:
         return compiled_as(name, jitted, tuple(static), work, leaves)(*args, **static)
-    options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
-    run = _loaded(_DIR, name, jitted, static, in_tree, leaves, options)
+    run = _loaded(_DIR, name, jitted, static, in_tree, leaves, _options(work, leaves))
     return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
 
 
@@ -158,7 +164,7 @@ def compiled_as(name: str, jitted: Callable, static_names: tuple[str, ...],
     :func:`quick` picks, the same function compiled with :data:`QUICK_OPTIONS` (one per
     ``name`` and process). :func:`call` uses it; so does code that calls a jitted
     function itself and wants the commands' choice of compiler options."""
-    if work is None or not quick(work, leaves):
+    if _options(work, leaves) is None:
         return jitted
     with _QUICK_LOCK:
         fast = _QUICK.get(name)
@@ -196,15 +202,15 @@ def ahead(name: str, jitted: Callable, static: dict,
                 program = compiled_as(name, jitted, tuple(static), work, leaves)
                 program.lower(*args, **static).compile()
             else:
-                options = QUICK_OPTIONS if work is not None and quick(work, leaves) else None
-                program = _loaded(_DIR, name, jitted, static, in_tree, leaves, options)
+                program = _loaded(_DIR, name, jitted, static, in_tree, leaves,
+                                  _options(work, leaves))
                 program.lower(*leaves).compile()
 
     signatures = []
     for args, work in calls:
         leaves, in_tree = jax.tree.flatten(args)
         signatures.append((str(in_tree), *(f"{tuple(x.shape)}:{x.dtype}" for x in leaves),
-                           work is not None and quick(work, leaves)))
+                           _options(work, leaves) is not None))
     distinct = list(dict.fromkeys(signatures))
     pool = ThreadPoolExecutor(max(1, min(len(distinct), os.cpu_count() or 1)),
                               thread_name_prefix=f"compile-{name}")
