@@ -206,10 +206,10 @@ def ahead(name: str, jitted: Callable, static: dict,
                                   _options(work, leaves))
                 program.lower(*leaves).compile()
 
-    signatures = []
+    signatures = []  # the program of each call: its key, and its options
     for args, work in calls:
         leaves, in_tree = jax.tree.flatten(args)
-        signatures.append((str(in_tree), *(f"{tuple(x.shape)}:{x.dtype}" for x in leaves),
+        signatures.append((program_key(name, tuple(sorted(static.items())), in_tree, leaves),
                            _options(work, leaves) is not None))
     distinct = list(dict.fromkeys(signatures))
     pool = ThreadPoolExecutor(max(1, min(len(distinct), os.cpu_count() or 1)),
