@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import shutil
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -177,23 +178,52 @@ def test_no_division_by_a_square_root_in_the_programs():
     from the processor's approximate instruction, so results differed between Intel and
     AMD processors. No division in the evaluation's programs (closed form; stepped
     users with collision checks) takes a square root as its divisor
-    (``quaternion.sqrt_divisor``). Checked on the lowered programs, which costs no
-    compilation."""
-    import re
-
+    (``quaternion.sqrt_divisor``). Checked on the traced programs, which costs no
+    compilation: every division's divisor is followed to where it is made, through
+    nested jitted functions (their results and arguments), as XLA sees it once it has
+    inlined them. (Read from the lowered text, SSA names repeat across a program's
+    regions, and a name of one region matched a square root of another.)"""
     import jax
+    from jax.extend.core import Literal, jaxprs_in_params
 
     from shacc_jax.runplan import plan
     from shacc_jax.types import Geometry, Params
+
+    # What XLA inlines: a value made in one is the same value in the caller.
+    calls = ("jit", "pjit", "closed_call", "checkpoint", "custom_jvp_call", "custom_vjp_call")
+
+    def roots_divided(jaxpr, rooted_in=()) -> tuple[int, int, list, list]:
+        """(square roots, divisions, divisions by a square root) in ``jaxpr``, whose
+        invars ``rooted_in`` are square roots; also which of its outvars are."""
+        rooted = {v for v, r in zip(jaxpr.invars, rooted_in, strict=False) if r}
+        n_roots = n_divs = 0
+        bad: list = []
+        for e in jaxpr.eqns:
+            name = e.primitive.name
+            if name == "sqrt":
+                n_roots += 1
+                rooted.update(e.outvars)
+            elif name == "div":
+                n_divs += 1
+                if not isinstance(e.invars[1], Literal) and e.invars[1] in rooted:
+                    bad.append(e)
+            for sub in jaxprs_in_params(e.params):
+                inner = [v in rooted if not isinstance(v, Literal) else False
+                         for v in e.invars] if name in calls else []
+                r, d, b, out = roots_divided(sub, inner)
+                n_roots, n_divs, bad = n_roots + r, n_divs + d, bad + b
+                if name in calls:
+                    rooted.update(v for v, o in zip(e.outvars, out, strict=False) if o)
+        return n_roots, n_divs, bad, [not isinstance(v, Literal) and v in rooted
+                                      for v in jaxpr.outvars]
 
     scenes = [random_scene(60 + i, ("uniform", "gaussian")[i % 2], 3, 5) for i in range(2)]
     for over in ({}, {"user_noise": 0.1, "user_tremor": 0.01, "collision": "on"}):
         b = bake([precompute(s, s.settings(DEFAULTS, {"start_grid": [2, 2], **over}))
                   for s in scenes])
         args = (Geometry.from_bake(b, np.float32), Params.from_bake(b, np.float32))
-        text = jax.jit(shacc_jax.evaluate, static_argnames="layout").lower(
-            *args, layout=plan(b, shacc_jax.MODES).layout).as_text()
-        roots = set(re.findall(r"(%\S+) = stablehlo\.sqrt ", text))
-        assert roots, over  # the pattern below reads this program's text
-        divisors = re.findall(r"stablehlo\.divide %\S+, (%\S+) ", text)
-        assert divisors and not roots.intersection(divisors), over
+        traced = jax.make_jaxpr(partial(shacc_jax.evaluate,
+                                        layout=plan(b, shacc_jax.MODES).layout))(*args)
+        n_roots, n_divs, bad, _ = roots_divided(traced.jaxpr)
+        assert n_roots and n_divs, over  # the walk reads this program
+        assert not bad, (over, [str(e)[:200] for e in bad[:3]])
