@@ -112,12 +112,13 @@ def check(scene: SceneView, lane: Lane, p: Array, r: Array, layout: Layout, trac
     if intent is None:
         return Check(p, travelled, done, code, activated, r, counted, clear)
     kind = jnp.zeros((), jnp.int32)  # none: the check at the start turns nothing
+    assist = None  # at the start: stepping's begin, once it knows V_j(p_0)
     if step is not None:
-        r, kind = intent_orientation(g, lane, p, r_before, dist, done, intent, n["max_angle"],
-                                     r if track else None, counted if track else None,
-                                     layout.intent_yaw)
+        r, kind, assist = intent_orientation(g, spaces, lane, p, r_before, dist, done, intent,
+                                             n["max_angle"], r if track else None,
+                                             counted if track else None, layout.intent_yaw)
     return Check(p, travelled, done, code, activated, r, kind == SCENE, jnp.full_like(clear,
-                 -jnp.inf), kind)
+                 -jnp.inf), kind, assist)
 
 
 def swept_entry(spaces, mask, lane: Lane, s: State, m: Move, p, active, sd, n):

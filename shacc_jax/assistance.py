@@ -25,10 +25,10 @@ from . import quaternion as quat
 from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_average, yaw_directions
 from .orientation import task_direction, task_orientation
-from .rollout_state import Lane, Move, State
+from .rollout_state import Assist, Lane, Move, State
 from .trig import sincos
 from .types import ASSISTANCE, Geometry
-from .vec3 import V3, length, xyz
+from .vec3 import V3, length, of, xyz
 
 NONE, SCENE, CORRECT, WRONG = (ASSISTANCE.index(k) for k in ("none", "scene", "correct",
                                                              "wrong"))
@@ -131,30 +131,38 @@ def _towards_each(spaces: shapes.Prepared, p: V3) -> tuple[V3, Array]:
     return xyz(lambda i: d[i] * inv), dist
 
 
-def assist_position(lane: Lane, s: State, m: Move, spaces: shapes.Prepared, mask: Array,
-                    mode: str) -> Move:
-    """The intent modes' position assistance on one lane's move (the user's step
-    ``m.delta`` from the gripper at s.p): with the posterior at s.p, ``blend`` takes
-    (1 - c) user + c (the step towards g*'s closest point) where the confidence c
-    reaches ``blend_threshold``, ``ho`` and ``shacc_ho`` add ``ho_gain`` v_max dt times
-    the posterior-weighted sum of the unit directions towards every task's closest
-    point; the assisted step at most v_max dt. The move's positions, path length and
-    the path since the last check follow the new step."""
+def position_assistance(lane: Lane, spaces: shapes.Prepared, p: Array, prob: Array,
+                        best: Array, conf: Array, mode: str) -> Assist:
+    """The intent modes' position assistance for the lane's next step, from the
+    posterior ``prob`` at the gripper p (its g* ``best`` and confidence ``conf``):
+    ``blend`` takes (1 - c) user + c (the step towards g*'s closest point) where the
+    confidence c reaches ``blend_threshold``; ``ho`` and ``shacc_ho`` add ``ho_gain``
+    v_max dt times the posterior-weighted sum of the unit directions towards every
+    task's closest point. Computed where the check is, so that the posterior at the
+    gripper serves both the check's orientation assistance and the next step."""
     x = lane.x
-    assert lane.v0 is not None  # the intent modes' lanes carry it
     step_length = x.v_max * x.dt
-    unit, dist = _towards_each(spaces, s.p)
-    prob = posterior(dist, lane.v0, mask, x.intent_beta)
-    user = m.delta
+    unit, dist = _towards_each(spaces, of(p))
     if mode == "blend":
-        best, conf = best_and_confidence(prob, mask)
-        on = conf >= x.blend_threshold
         size = jnp.minimum(step_length, dist[best])
-        new = xyz(lambda i: (1.0 - conf) * user[i] + conf * size * unit[i][best])
-    else:
-        on = jnp.ones((), bool)
-        pull = xyz(lambda i: x.ho_gain * step_length * quat.ordered_sum(prob * unit[i], 0))
-        new = xyz(lambda i: user[i] + pull[i])
+        pull = xyz(lambda i: conf * size * unit[i][best])
+        return Assist(conf, pull, conf >= x.blend_threshold)
+    pull = xyz(lambda i: x.ho_gain * step_length * quat.ordered_sum(prob * unit[i], 0))
+    return Assist(jnp.zeros_like(conf), pull, jnp.ones((), bool))
+
+
+def assist_position(lane: Lane, s: State, m: Move) -> Move:
+    """The intent modes' position assistance (``s.assist``, from the posterior where
+    the gripper is, :func:`position_assistance`) on one lane's move (the user's step
+    ``m.delta`` from the gripper at s.p); the assisted step at most v_max dt. The
+    move's positions, path length and the path since the last check follow the new
+    step."""
+    assert s.assist is not None  # the intent modes' states carry it
+    x = lane.x
+    step_length = x.v_max * x.dt
+    share, pull, on = s.assist
+    user = m.delta
+    new = xyz(lambda i: (1.0 - share) * user[i] + pull[i])
     n = length(new)
     scale = jnp.where(n > step_length, step_length / jnp.where(n > 0, n, 1.0), 1.0)
     delta = xyz(lambda i: jnp.where(on, new[i] * scale, user[i]))
@@ -173,12 +181,14 @@ def weighted_yaw_average(g: Geometry, weights: Array, p: Array) -> Array:
     return yaw_average(weights, *task_direction(g.orient_kind, fixed.T, g.orient_axis.T, p))
 
 
-def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,
-                       done: Array, mode: str, max_angle: Array, meta_turned: Array | None,
-                       inside_meta: Array | None, yaw: bool = False) -> tuple[Array, Array]:
+def intent_orientation(g: Geometry, spaces: shapes.Prepared, lane: Lane, p: Array, r: Array,
+                       dist: Array, done: Array, mode: str, max_angle: Array,
+                       meta_turned: Array | None, inside_meta: Array | None,
+                       yaw: bool = False) -> tuple[Array, Array, Assist]:
     """The intent modes' orientation assistance at the gripper p after a step (one
     lane; ``dist``: the mode's sdfs there, masked): (R after the turn, the step's kind
-    of assistance, an index of ASSISTANCE). ``blend``: towards g*'s orientation where
+    of assistance, an index of ASSISTANCE; and the next step's position assistance
+    from the same posterior, :func:`position_assistance`). ``blend``: towards g*'s orientation where
     the confidence reaches the threshold (correct where g* is the lane's task, else
     wrong), else none. ``ho``: towards the posterior-weighted Markley average of every
     task's orientation, always (correct where the largest weight is the lane's task).
@@ -207,4 +217,5 @@ def intent_orientation(g: Geometry, lane: Lane, p: Array, r: Array, dist: Array,
     if inside_meta is not None and meta_turned is not None:  # shacc_ho
         r_new = jnp.where(inside_meta, meta_turned, r_new)
         kind = jnp.where(inside_meta, SCENE, kind)
-    return r_new, jnp.where(done, NONE, kind).astype(jnp.int32)
+    return (r_new, jnp.where(done, NONE, kind).astype(jnp.int32),
+            position_assistance(lane, spaces, p, prob, best, conf, mode))

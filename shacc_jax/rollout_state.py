@@ -1,6 +1,7 @@
 """What a stepped rollout carries: its constants (:class:`Lane`), its state
-(:class:`State`), a step's move before its check (:class:`Move`) and a full check's
-answers (:class:`Check`). The parts of a step (``user_models``, ``activation``,
+(:class:`State`), a step's move before its check (:class:`Move`), a full check's
+answers (:class:`Check`) and, in the intent modes, the next step's position assistance
+(:class:`Assist`). The parts of a step (``user_models``, ``activation``,
 ``assistance``) read and make these; the scheduler (``lanes.run_queue``) moves them
 between slots. Per-lane arrays keep the lane axis last."""
 
@@ -71,6 +72,16 @@ class Move(NamedTuple):
     turned: Array | None
 
 
+class Assist(NamedTuple):
+    """The intent modes' position assistance for a lane's next step, from the posterior
+    at the gripper (``assistance.position_assistance``): the step is ``(1 - share)
+    user + pull`` where ``on``, else the user's."""
+
+    share: Array
+    pull: V3
+    on: Array
+
+
 class Check(NamedTuple):
     """A full check's answers at the gripper: its position (the entry point under the
     swept check), the path length, ended (activated or collided), the outcome code and
@@ -87,6 +98,7 @@ class Check(NamedTuple):
     counted: Array
     clear: Array
     kind: Array | None = None  # the intent modes: the step's assistance (ASSISTANCE index)
+    assist: Assist | None = None  # the intent modes: the next step's position assistance
 
 
 class State(NamedTuple):
@@ -115,3 +127,4 @@ class State(NamedTuple):
     # another (None elsewhere: the paper's modes have neither).
     correct: Array | None = None
     wrong: Array | None = None
+    assist: Assist | None = None  # the next step's position assistance

@@ -28,7 +28,15 @@ from . import lanes as scheduler
 from . import quaternion as quat
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
-from .assistance import CORRECT, WRONG, assist_position, prepare
+from .assistance import (
+    CORRECT,
+    WRONG,
+    assist_position,
+    best_and_confidence,
+    position_assistance,
+    posterior,
+    prepare,
+)
 from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
@@ -217,11 +225,20 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                             lane.p0 + lanes(shake)(lane, jnp.zeros(n, dtype)))
         first = lanes(checked)(lane, p_start, lane.r0)
         zero = jnp.zeros(n, dtype)
-        correct = wrong = None
+        correct = wrong = assist = None
         if intent is not None:
-            # V_j(p_0), the distances from the gripper's start to every space.
-            lane = lane._replace(v0=lanes(lambda ln, p: jnp.maximum(shapes.all_sdf(
-                scene_of(ln.scene).spaces, p), 0.0))(lane, first.p))
+            # V_j(p_0), the distances from the gripper's start to every space, and the
+            # first step's position assistance from the posterior there.
+            def at_start(ln, p):
+                view = scene_of(ln.scene)
+                g, spaces = view.geometry, view.spaces
+                v0 = jnp.maximum(shapes.all_sdf(spaces, p), 0.0)
+                prob = posterior(v0, v0, g.task_mask, ln.x.intent_beta)
+                best, conf = best_and_confidence(prob, g.task_mask)
+                return v0, position_assistance(ln, spaces, p, prob, best, conf, intent)
+
+            v0, assist = lanes(at_start)(lane, first.p)
+            lane = lane._replace(v0=v0)
             correct = wrong = jnp.zeros(n, jnp.int32)
         live = occupied & lane.real & ~first.done & (lane.x.max_steps > 0)
         w0 = lanes(lambda ln: of(ln.x.user_noise * ln.once.noise0))(lane)
@@ -235,7 +252,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
             d0 = lanes(_distance_to_decoy)(lane, first.p)
         return lane, State(zero, of(lane.p0), of(first.p), w0, mode, pause, turned, d0,
                            lane.r0, jnp.zeros(n, jnp.int32), zero, first.done, first.code,
-                           first.activated, first.clear, zero, live, correct, wrong)
+                           first.activated, first.clear, zero, live, correct, wrong, assist)
 
     def finish(ln, e):
         code = jnp.where(e.done, e.code, am.TIMEOUT)
@@ -250,9 +267,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
         m = lanes(move)(lane, s, once(lanes(partial(aim, decoys=layout.switching))(lane, s),
                                       token))
         if intent is not None:
-            m = lanes(lambda ln, st, mv: assist_position(
-                ln, st, mv, scene_of(ln.scene).spaces, per_lane.task_mask[ln.scene],
-                intent))(lane, s, m)
+            m = lanes(assist_position)(lane, s, m)
         tol = lane.x.activation_tol + CLEARANCE_MARGIN
         need = s.live & (s.clear - m.moved <= tol)
 
@@ -298,11 +313,13 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
         return t._replace(live=s.live & ~(go & (t.done | (t.k >= steps))))
 
     def counts(s, sub_s, c, put):
-        """The intent modes' counts of steps towards the lane's task and another."""
+        """The intent modes' counts of steps towards the lane's task and another, and the
+        next step's position assistance."""
         if intent is None:
-            return None, None
+            return None, None, None
         return (put(s.correct, sub_s.correct + (c.kind == CORRECT).astype(jnp.int32)),
-                put(s.wrong, sub_s.wrong + (c.kind == WRONG).astype(jnp.int32)))
+                put(s.wrong, sub_s.wrong + (c.kind == WRONG).astype(jnp.int32)),
+                jax.tree.map(put, s.assist, c.assist))
 
     counters = (jnp.zeros(L, jnp.int32), jnp.zeros(L, jnp.int32)) if intent else (None, None)
     result = Result(jnp.full(L, am.TIMEOUT, jnp.int32), jnp.full(L, -1, jnp.int32),
