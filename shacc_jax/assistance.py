@@ -142,11 +142,13 @@ def position_assistance(lane: Lane, spaces: shapes.Prepared, p: Array, prob: Arr
     gripper serves both the check's orientation assistance and the next step."""
     x = lane.x
     step_length = x.v_max * x.dt
-    unit, dist = _towards_each(spaces, of(p))
     if mode == "blend":
-        size = jnp.minimum(step_length, dist[best])
-        pull = xyz(lambda i: conf * size * unit[i][best])
+        # Only g*'s space: one projection, not one onto every space.
+        unit, dist = _towards_each(jax.tree.map(lambda a: a[best][None], spaces), of(p))
+        size = jnp.minimum(step_length, dist[0])
+        pull = xyz(lambda i: conf * size * unit[i][0])
         return Assist(conf, pull, conf >= x.blend_threshold)
+    unit, dist = _towards_each(spaces, of(p))
     pull = xyz(lambda i: x.ho_gain * step_length * quat.ordered_sum(prob * unit[i], 0))
     return Assist(jnp.zeros_like(conf), pull, jnp.ones((), bool))
 
