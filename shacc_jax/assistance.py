@@ -119,6 +119,24 @@ def best_and_confidence(prob: Array, mask: Array) -> tuple[Array, Array]:
     return best, top - second
 
 
+def inferred(v: Array, v0: Array, mask: Array, beta: Array) -> tuple[Array, Array, Array]:
+    """At the gripper, from every task's distance left ``v`` (V_j = max(sdf_j, 0)) and
+    at the start ``v0``: the posterior (:func:`posterior`), g* and the confidence
+    (:func:`best_and_confidence`)."""
+    prob = posterior(v, v0, mask, beta)
+    return (prob, *best_and_confidence(prob, mask))
+
+
+def first_assistance(lane: Lane, spaces: shapes.Prepared, mask: Array, p: Array,
+                     mode: str) -> tuple[Array, Assist]:
+    """At the start p (one lane): V_j(p_0), every task's distance left, and the first
+    step's position assistance, from the posterior there (uniform over the real
+    tasks)."""
+    v0 = jnp.maximum(shapes.all_sdf(spaces, p), 0.0)
+    return v0, position_assistance(lane, spaces, p, *inferred(v0, v0, mask, lane.x.intent_beta),
+                                   mode)
+
+
 def _towards_each(spaces: shapes.Prepared, p: V3) -> tuple[V3, Array]:
     """At p, per task (T,): the unit direction towards its space's closest point (0
     where p is on or in it) and that point's distance, which is V_j = max(sdf_j, 0)
@@ -199,9 +217,7 @@ def intent_orientation(g: Geometry, spaces: shapes.Prepared, lane: Lane, p: Arra
     as none. ``yaw``: ``Layout.intent_yaw`` (the average in closed form)."""
     x = lane.x
     assert lane.v0 is not None
-    mask = g.task_mask
-    prob = posterior(jnp.maximum(dist, 0.0), lane.v0, mask, x.intent_beta)
-    best, conf = best_and_confidence(prob, mask)
+    prob, best, conf = inferred(jnp.maximum(dist, 0.0), lane.v0, g.task_mask, x.intent_beta)
     if mode == "blend":
         on = conf >= x.blend_threshold
         goal = task_orientation(g.orient_kind[best], g.orient_quat[best], g.orient_axis[best], p)

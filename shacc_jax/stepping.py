@@ -28,15 +28,7 @@ from . import lanes as scheduler
 from . import quaternion as quat
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
-from .assistance import (
-    CORRECT,
-    WRONG,
-    assist_position,
-    best_and_confidence,
-    position_assistance,
-    posterior,
-    prepare,
-)
+from .assistance import CORRECT, WRONG, assist_position, first_assistance, prepare
 from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
@@ -231,11 +223,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
             # first step's position assistance from the posterior there.
             def at_start(ln, p):
                 view = scene_of(ln.scene)
-                g, spaces = view.geometry, view.spaces
-                v0 = jnp.maximum(shapes.all_sdf(spaces, p), 0.0)
-                prob = posterior(v0, v0, g.task_mask, ln.x.intent_beta)
-                best, conf = best_and_confidence(prob, g.task_mask)
-                return v0, position_assistance(ln, spaces, p, prob, best, conf, intent)
+                return first_assistance(ln, view.spaces, view.geometry.task_mask, p, intent)
 
             v0, assist = lanes(at_start)(lane, first.p)
             lane = lane._replace(v0=v0)
