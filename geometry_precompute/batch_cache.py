@@ -17,6 +17,11 @@ version only, stay valid). A batch is the scenes one task was given, which depen
 the sweep's chunk and its count of precompute workers: a sweep with another count reads
 the scenes' entries instead, as before.
 
+A file's name holds the code's version. Reading an entry marks it used; the first entry
+a process stores removes the entries of other versions that nothing has used for a day
+(``fileio.prune_stale``), so the folder does not grow with every code change, and two
+versions of the code used side by side keep each other's entries.
+
 An entry is used only if it is whole and written for its key (``fileio.seal``), holds
 every field of the bake once per point with the batch's scene count, and nothing but
 plain numbers and booleans; anything else is a miss, and the batch is made and
@@ -36,7 +41,7 @@ import numpy as np
 from .baking import GEOMETRY_FIELDS, PARAM_FIELDS, SEARCH_FIELDS, BakedScenes
 from .cache import random_key, scene_key
 from .errors import HostError
-from .fileio import seal, unseal, write_atomic
+from .fileio import mark_used, prune_stale, seal, unseal, write_atomic
 from .scene import Scene
 
 FORMAT = "shacc-batch-cache"
@@ -68,7 +73,9 @@ def batch_key(refs, points: list[dict], tasks: int, objects: int, settings) -> s
 
 
 def path_of(folder: Path, key: str) -> Path:
-    return folder / f"batch-{key}.npz"
+    """The entry's file: its name holds the code's version (the source digest's first
+    16 digits), by which :func:`store` prunes other versions' entries."""
+    return folder / f"batch-{_source()[:16]}-{key}.npz"
 
 
 def store(folder: Path, key: str, bakes: list[BakedScenes], scenes: dict,
@@ -91,18 +98,22 @@ def store(folder: Path, key: str, bakes: list[BakedScenes], scenes: dict,
                 np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
     folder.mkdir(parents=True, exist_ok=True)
     write_atomic(path_of(folder, key), seal(key, buffer.getvalue()))
+    # Any code change makes new keys: other versions' entries unused for a day go.
+    prune_stale(folder, "batch-*.npz", _source()[:16])
 
 
 def read(folder: Path, key: str, n_scenes: int, n_points: int
          ) -> tuple[list[BakedScenes], dict, tuple[str, ...]] | None:
     """(the bakes, one per point; the scenes' columns; the scenes' warnings) of the entry
     for ``key``, or None where there is no valid one."""
+    path = path_of(folder, key)
     try:
-        payload = unseal(key, path_of(folder, key).read_bytes())
+        payload = unseal(key, path.read_bytes())
     except OSError:
         return None
     if payload is None:
         return None
+    mark_used(path)
     try:
         with np.load(io.BytesIO(payload), allow_pickle=False) as npz:
             data = {name: npz[name] for name in npz.files}

@@ -31,6 +31,7 @@ import os
 import stat
 import tempfile
 import threading
+import time
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -191,3 +192,48 @@ def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
                          f"{MAX_DEPTH} levels") from None
     check_depth(parsed, str(path))
     return parsed
+
+
+# A cache file of another version of the code, unused this long, is removed.
+STALE_AFTER_S = 24 * 3600
+_PRUNED: set[tuple[str, str]] = set()
+
+
+def mark_used(path: Path) -> None:
+    """Note that a cache file was just used (its modification time, which
+    :func:`prune_stale` reads): a file that another version of the code still uses is
+    kept."""
+    try:
+        os.utime(path)
+    except OSError:  # a read-only cache: nothing is pruned there either
+        pass
+
+
+def prune_stale(folder: Path, pattern: str, version: str, once: bool = True) -> int:
+    """Remove the files of ``folder`` matching ``pattern`` whose names do not hold
+    ``-version-`` (the source digest of the code that writes them: a code change makes
+    every older file unreachable) and that nothing has used for
+    :data:`STALE_AFTER_S`; returns how many it removed. A file that cannot be removed
+    stays. With ``once``, only the first call of a process for a folder and pattern
+    looks (a cache folder may hold a scene entry for every scene ever computed)."""
+    if once:
+        seen = (str(folder), pattern)
+        if seen in _PRUNED:
+            return 0
+        _PRUNED.add(seen)
+    removed = 0
+    try:
+        entries = list(folder.glob(pattern))
+    except OSError:
+        return 0
+    now = time.time()
+    for path in entries:
+        if f"-{version}-" in path.name:
+            continue
+        try:
+            if now - path.stat().st_mtime > STALE_AFTER_S:
+                path.unlink()
+                removed += 1
+        except OSError:
+            pass
+    return removed

@@ -8,7 +8,9 @@ that decides it: the source of this package and of the bake's schema, the jax an
 jaxlib versions, the backend, x64 mode, the stack frames kept in source locations,
 the static arguments and the input shapes and dtypes. A later
 process with the same key deserialises the program and calls it; its compilation
-then comes from the persistent cache. Any change to the code gives a new key.
+then comes from the persistent cache. Any change to the code gives a new key; a file's
+name holds the code's version, and the first program a process stores removes other
+versions' programs that nothing has used for a day (``fileio.prune_stale``).
 
 :func:`set_dir` turns it on (the command line does, beside the compilation cache);
 a library user who never calls it traces as usual.
@@ -31,7 +33,7 @@ import jaxlib
 from jax import export
 
 from geometry_precompute import schema
-from geometry_precompute.fileio import seal, unseal, write_atomic
+from geometry_precompute.fileio import mark_used, prune_stale, seal, unseal, write_atomic
 
 _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
@@ -234,7 +236,8 @@ def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
     loaded = key if options is None else f"{key}-quick"  # one export, either options
     run = _LOADED.get(loaded)
     if run is None:
-        path = folder / f"export-{name}-{key}.bin"
+        version = _source_hash()[:16]
+        path = folder / f"export-{name}-{version}-{key}.bin"
         exp = None
         try:
             payload = unseal(key, path.read_bytes())
@@ -243,6 +246,7 @@ def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
         if payload is not None:  # whole, and written for this key (fileio.seal)
             try:
                 exp = export.deserialize(bytearray(payload))
+                mark_used(path)
             except Exception:  # written by another jax: rebuilt
                 exp = None
         if exp is None:
@@ -253,6 +257,9 @@ def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
             specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
             exp = export.export(jax.jit(flat))(*specs)
             _store(path, seal(key, bytes(exp.serialize())))
+            # Any code change makes new keys: other versions' programs unused for a
+            # day go.
+            prune_stale(folder, "export-*.bin", version)
         run = _LOADED[loaded] = jax.jit(exp.call, compiler_options=options)
     return run
 

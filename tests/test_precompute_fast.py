@@ -7,7 +7,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -344,8 +346,16 @@ def test_a_precompute_task_keeps_its_batch_as_arrays(tmp_path, monkeypatch):
     def run(pts=points):
         return batch.precompute_batch(refs, pts, str(tmp_path), 4, 4)
 
+    # Another version's entries: one unused for two days (removed by the first store),
+    # one used an hour ago (kept).
+    stale, recent = tmp_path / "batch-0000000000000000-a.npz", tmp_path / "batch-1-b.npz"
+    for path, age in ((stale, 2 * 86400), (recent, 3600)):
+        path.write_bytes(b"old")
+        os.utime(path, (time.time() - age, time.time() - age))
     first = run()
     assert (first.precomputed, first.cache_hits) == (3, 0)
+    assert not stale.exists() and recent.exists()
+    recent.unlink()
     (entry,) = tmp_path.glob("batch-*.npz")
     for scene_entry in tmp_path.glob("*.json"):
         scene_entry.unlink()
@@ -376,3 +386,27 @@ def test_a_precompute_task_keeps_its_batch_as_arrays(tmp_path, monkeypatch):
     foreign = next(p for p in tmp_path.glob("batch-*.npz") if p != entry)
     entry.write_bytes(foreign.read_bytes())  # another key's entry under this name
     assert run().precomputed == 0 and entry.read_bytes() == good  # rebuilt from the scenes
+
+
+def test_a_cache_folder_loses_only_other_versions_files_unused_for_a_day(tmp_path):
+    """``fileio.prune_stale`` removes the files of the pattern that another version of
+    the code wrote and nothing used for a day; its own version's, recent ones and other
+    names stay; reading a file (``mark_used``) keeps it; it looks once per process and
+    folder."""
+    from geometry_precompute import fileio
+
+    now, day = time.time(), fileio.STALE_AFTER_S
+    ages = {"batch-aaaa-k1.npz": 2 * day, "batch-bbbb-k2.npz": 2 * day,
+            "batch-bbbb-k3.npz": day - 600, "scene-bbbb-k4.npz": 2 * day,
+            "batch-cccc-k5.npz": 2 * day}
+    for name, age in ages.items():
+        (tmp_path / name).write_bytes(b"x")
+        os.utime(tmp_path / name, (now - age, now - age))
+    fileio.mark_used(tmp_path / "batch-cccc-k5.npz")  # read just now
+    assert fileio.prune_stale(tmp_path, "batch-*.npz", "aaaa") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "batch-aaaa-k1.npz", "batch-bbbb-k3.npz", "batch-cccc-k5.npz", "scene-bbbb-k4.npz"]
+    os.utime(tmp_path / "batch-cccc-k5.npz", (now - 2 * day, now - 2 * day))
+    assert fileio.prune_stale(tmp_path, "batch-*.npz", "aaaa") == 0  # looked already
+    assert fileio.prune_stale(tmp_path, "batch-*.npz", "aaaa", once=False) == 1
+    assert not (tmp_path / "batch-cccc-k5.npz").exists()

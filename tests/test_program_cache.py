@@ -4,6 +4,8 @@ list of calls' programs side by side, once each."""
 
 from __future__ import annotations
 
+import os
+import time
 from functools import partial
 
 import jax
@@ -26,8 +28,13 @@ def test_exported_program_equals_plain_jit(shipped_bake, tmp_path):
     plain = evaluate(shipped_bake)
     program_cache.set_dir(tmp_path)
     program_cache.forget_loaded()
+    # Another version's program, unused for two days: the first store removes it.
+    stale = tmp_path / "export-evaluate-0000000000000000-a.bin"
+    stale.write_bytes(b"old")
+    os.utime(stale, (time.time() - 2 * 86400, time.time() - 2 * 86400))
     try:
         first = evaluate(shipped_bake)          # exports and stores
+        assert not stale.exists()
         (entry,) = tmp_path.glob("export-evaluate-*.bin")
         program_cache.forget_loaded()            # as a new process would
         second = evaluate(shipped_bake)         # deserialises
