@@ -246,6 +246,17 @@ def test_cli_module_imports_nothing_heavy():
     assert out.stdout.strip() == "[]"
 
 
+def test_evaluate_command_does_not_import_scipy_stats():
+    """`shacc evaluate` without a population of users never imports scipy.stats (its
+    import is about a second, a third of a warm evaluate; the statistics serve reports
+    and drawn users)."""
+    code = ("import sys; from sweeps.app.cli import main; "
+            f"main(['evaluate', {SCENE!r}]); print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "False"
+
+
 def test_precompute_command_does_not_import_jax(tmp_path):
     code = ("import sys; from sweeps.app.cli import main; "
             f"main(['precompute', {SCENE!r}]); print('jax' in sys.modules)")

@@ -20,7 +20,6 @@ from geometry_precompute.baking import bake
 from geometry_precompute.loading import scene_files as folder_scene_files
 from geometry_precompute.settings import describe_user
 from shacc_jax.types import ASSISTANCE, OUTCOMES
-from sweeps.analysis.robustness import drawn
 from sweeps.app.inputs import load_and_precompute
 from sweeps.output import announce, check_output_file, clean_json, human_output, write_output
 from sweeps.pipeline import evaluate_results, scene_json, tasks_json
@@ -125,6 +124,8 @@ def print_drawn(ev) -> None:
     user = ev.evaluation.rollouts.user
     if user is None or not user.shape[-1] or "baseline" not in ev.modes:
         return
+    from sweeps.analysis.robustness import drawn  # deferred: scipy.stats, about 1 s
+
     found = drawn(np.asarray(ev.evaluation.rollouts.outcome), np.asarray(user),
                   np.asarray(ev.baked.task_mask), list(ev.modes))
     if found:
