@@ -41,7 +41,7 @@ import numpy as np
 from .baking import GEOMETRY_FIELDS, PARAM_FIELDS, SEARCH_FIELDS, BakedScenes
 from .cache import random_key, scene_key
 from .errors import HostError
-from .fileio import mark_used, prune_stale, seal, unseal, write_atomic
+from .fileio import mark_used, prune_stale, seal, source_digest, unseal, write_atomic
 from .scene import Scene
 
 FORMAT = "shacc-batch-cache"
@@ -54,11 +54,8 @@ def _source() -> str:
     """A digest of this package's code and data files (templates, settings)."""
     global _SOURCE
     if _SOURCE is None:
-        h = hashlib.sha256()
         here = Path(__file__).parent
-        for f in sorted([*here.glob("*.py"), *here.glob("*.toml")]):
-            h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
-        _SOURCE = h.hexdigest()
+        _SOURCE = source_digest(sorted([*here.glob("*.py"), *here.glob("*.toml")]))
     return _SOURCE
 
 

@@ -194,6 +194,16 @@ def read_toml(path: str | Path, what: str = "a TOML file") -> dict[str, Any]:
     return parsed
 
 
+def source_digest(files) -> str:
+    """A SHA-256 of the files' names and contents in the order given: the version of
+    the code that a cache entry's key holds."""
+    h = hashlib.sha256()
+    for f in files:
+        f = Path(f)
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 # A cache file of another version of the code, unused this long, is removed.
 STALE_AFTER_S = 24 * 3600
 _PRUNED: set[tuple[str, str]] = set()

@@ -33,7 +33,14 @@ import jaxlib
 from jax import export
 
 from geometry_precompute import schema
-from geometry_precompute.fileio import mark_used, prune_stale, seal, unseal, write_atomic
+from geometry_precompute.fileio import (
+    mark_used,
+    prune_stale,
+    seal,
+    source_digest,
+    unseal,
+    write_atomic,
+)
 
 _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
@@ -91,11 +98,8 @@ def release_compiled() -> None:
 def _source_hash() -> str:
     global _SOURCE_HASH
     if _SOURCE_HASH is None:
-
-        h = hashlib.sha256()
-        for f in [*sorted(Path(__file__).parent.glob("*.py")), Path(schema.__file__)]:
-            h.update(f.name.encode() + b"\0" + f.read_bytes())
-        _SOURCE_HASH = h.hexdigest()
+        _SOURCE_HASH = source_digest([*sorted(Path(__file__).parent.glob("*.py")),
+                                      Path(schema.__file__)])
     return _SOURCE_HASH
 
 
