@@ -148,7 +148,6 @@ def store_quietly(folder: Path, key: str, bakes: list[BakedScenes], scenes: dict
     """:func:`store`; the reason it could not, or None."""
     try:
         store(folder, key, bakes, scenes, scene_warnings)
-    except (OSError, HostError) as e:
-        return str(e) if isinstance(e, HostError) else \
-            str(HostError.of(e, folder, "store precomputed scenes"))
+    except OSError as e:  # a HostError is one, and HostError.of keeps it
+        return str(HostError.of(e, folder, "store precomputed scenes"))
     return None

@@ -164,7 +164,6 @@ def cached(scene: Scene | tuple, settings: Settings, folder: Path | None
     try:
         folder.mkdir(parents=True, exist_ok=True)
         write_atomic(path, _entry(key, r))
-    except (OSError, HostError) as e:
-        return r, False, str(HostError.of(e, folder, "store precomputed scenes")) \
-            if not isinstance(e, HostError) else str(e)
+    except OSError as e:  # a HostError is one, and HostError.of keeps it
+        return r, False, str(HostError.of(e, folder, "store precomputed scenes"))
     return r, False, None

@@ -409,14 +409,15 @@ def _search_groups(baked, scenes_per_call, population, generations, candidates) 
     # they all compile side by side while the first group runs.
     firsts: dict[int, tuple] = {}
     for n, idx, _, work in pieces:
-        firsts.setdefault(n, (idx, work))
-    with program_cache.ahead("search", _search, static,
-                             [(arrays(n, idx), work) for n, (idx, work) in firsts.items()]
-                             ) as compiled:
+        if n not in firsts:
+            firsts[n] = (arrays(n, idx), work)
+    with program_cache.ahead("search", _search, static, list(firsts.values())) as compiled:
         ready = dict(zip(firsts, compiled, strict=True))
         for n, idx, keep, work in pieces:
             ready[n].result()
-            found = program_cache.call("search", _search, static, arrays(n, idx),
+            # A group's first call takes the arrays its program was compiled for.
+            args = firsts.pop(n)[0] if n in firsts else arrays(n, idx)
+            found = program_cache.call("search", _search, static, args,
                                        _SEARCH_STRUCTURE, work=work)
             found = jax.tree.map(lambda x, keep=keep: np.asarray(x)[:len(keep)], found)
             out.q[keep, :n] = found.q
