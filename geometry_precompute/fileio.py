@@ -219,13 +219,15 @@ def mark_used(path: Path) -> None:
         pass
 
 
-def prune_stale(folder: Path, pattern: str, version: str, once: bool = True) -> int:
+def prune_stale(folder: Path, pattern: str, version: str | None, once: bool = True,
+                after_s: float = STALE_AFTER_S) -> int:
     """Remove the files of ``folder`` matching ``pattern`` whose names do not hold
     ``-version-`` (the source digest of the code that writes them: a code change makes
-    every older file unreachable) and that nothing has used for
-    :data:`STALE_AFTER_S`; returns how many it removed. A file that cannot be removed
-    stays. With ``once``, only the first call of a process for a folder and pattern
-    looks (a cache folder may hold a scene entry for every scene ever computed)."""
+    every older file unreachable; None: a name says no version, so every file may go)
+    and that nothing has used for ``after_s`` seconds; returns how many it removed. A
+    file that cannot be removed stays. With ``once``, only the first call of a process
+    for a folder and pattern looks (a cache folder may hold a scene entry for every
+    scene ever computed)."""
     if once:
         seen = (str(folder), pattern)
         if seen in _PRUNED:
@@ -238,10 +240,10 @@ def prune_stale(folder: Path, pattern: str, version: str, once: bool = True) -> 
         return 0
     now = time.time()
     for path in entries:
-        if f"-{version}-" in path.name:
+        if version is not None and f"-{version}-" in path.name:
             continue
         try:
-            if now - path.stat().st_mtime > STALE_AFTER_S:
+            if now - path.stat().st_mtime > after_s:
                 path.unlink()
                 removed += 1
         except OSError:

@@ -22,9 +22,12 @@ wins.
 
 Where: ``$SHACC_COMPILE_CACHE`` if set (a folder, or ``off`` to disable), else
 ``$XDG_CACHE_HOME/shacc/compiled`` (``~/.cache/shacc/compiled`` when
-``XDG_CACHE_HOME`` is unset). Entries never go stale (a change of code or version
-makes new keys); the folder only grows with new shapes, and deleting it at any time
-is safe (``rm -r ~/.cache/shacc/compiled``).
+``XDG_CACHE_HOME`` is unset). An entry never goes stale (a change of code or version
+makes new keys), and old ones are removed: a traced program of another version of the
+code that nothing has used for a day (:func:`geometry_precompute.fileio.prune_stale`),
+and an XLA executable that nothing has loaded for a week (:data:`XLA_STALE_AFTER_S`:
+JAX's keys do not say which code made them). Deleting the folder at any time is safe
+(``rm -r ~/.cache/shacc/compiled``).
 """
 
 from __future__ import annotations
@@ -33,9 +36,20 @@ import functools
 import os
 from pathlib import Path
 
-from geometry_precompute.fileio import cache_home, seal, unseal, write_atomic
+from geometry_precompute.fileio import (
+    cache_home,
+    mark_used,
+    prune_stale,
+    seal,
+    unseal,
+    write_atomic,
+)
 
 ENV = "SHACC_COMPILE_CACHE"
+# JAX's keys name the program, not the code that traced it, so an entry of older code
+# cannot be told from a current one by its name: an entry nothing has loaded for this
+# long is removed (by the first entry a process stores). Loading one touches it.
+XLA_STALE_AFTER_S = 7 * 24 * 3600
 
 
 def cache_dir() -> Path | None:
@@ -62,16 +76,21 @@ def _verified_xla_cache(folder: Path):
             self._path = path
 
         def get(self, key: str) -> bytes | None:
+            path = self._path / f"{key}-sealed"
             try:
-                return unseal(key, (self._path / f"{key}-sealed").read_bytes())
+                value = unseal(key, path.read_bytes())
             except OSError:
                 return None
+            if value is not None:  # a whole entry of this key: in use
+                mark_used(path)
+            return value
 
         def put(self, key: str, value: bytes) -> None:
             try:
                 write_atomic(self._path / f"{key}-sealed", seal(key, value))
             except OSError:  # an unwritable cache costs time later, never this run
-                pass
+                return
+            prune_stale(self._path, "*-sealed", None, after_s=XLA_STALE_AFTER_S)
 
     with cc._cache_initialized_mutex:
         cc._cache = VerifiedCache(folder)

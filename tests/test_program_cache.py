@@ -187,3 +187,43 @@ def test_ahead_compiles_each_program_once_side_by_side(tmp_path, exported):
     for (x, y), out in zip(calls, got, strict=False):
         assert out["dot"].dtype == np.float64  # compiled in x64, as the caller runs
         np.testing.assert_allclose(out["dot"], 3 * np.sum(x * y), rtol=1e-12)
+
+
+def test_xla_entries_nothing_loaded_for_a_week_are_removed(tmp_path):
+    """JAX's keys do not say which code made an executable, so ``xla/`` loses the
+    entries nothing has loaded for ``XLA_STALE_AFTER_S``: the first entry a process
+    stores removes them and keeps a younger one; loading an entry touches it, so an
+    entry in use is never old."""
+    import subprocess
+    import sys
+
+    from sweeps import compile_cache
+
+    folder = tmp_path / "compiled"
+    xla = folder / "xla"
+    xla.mkdir(parents=True)
+    now, week = time.time(), compile_cache.XLA_STALE_AFTER_S
+    old, young = xla / "jit_old-1234-sealed", xla / "jit_young-5678-sealed"
+    for path, age in ((old, week + 3600), (young, week - 3600)):
+        path.write_bytes(b"x")
+        os.utime(path, (now - age, now - age))
+    script = ("from sweeps import compile_cache\n"
+              "compile_cache.enable()\n"
+              "import jax, jax.numpy as jnp\n"
+              "print(jax.jit(lambda x: 2 * x + 1)(jnp.arange(3.0)).tolist())\n")
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "SHACC_COMPILE_CACHE": str(folder)}
+
+    def run() -> None:
+        out = subprocess.run([sys.executable, "-c", script], env=env, check=True,
+                             timeout=300, capture_output=True, text=True).stdout
+        assert out.strip() == "[1.0, 3.0, 5.0]"
+
+    run()
+    assert not old.exists() and young.exists()
+    stored = set(xla.glob("*-sealed")) - {young}
+    assert stored  # the program's executable was stored
+    for path in stored:  # ... and then left unused for longer than the limit
+        os.utime(path, (now - 2 * week, now - 2 * week))
+    run()  # loads it (nothing new is stored, so nothing is pruned)
+    assert set(xla.glob("*-sealed")) - {young} == stored
+    assert all(time.time() - p.stat().st_mtime < 600 for p in stored)  # touched on load
