@@ -110,7 +110,6 @@ def read(folder: Path, key: str, n_scenes: int, n_points: int
         return None
     if payload is None:
         return None
-    mark_used(path)
     try:
         with np.load(io.BytesIO(payload), allow_pickle=False) as npz:
             data = {name: npz[name] for name in npz.files}
@@ -140,6 +139,7 @@ def read(folder: Path, key: str, n_scenes: int, n_points: int
                         "C_final": np.asarray(lab["C_final"], float)}))
     except (OSError, ValueError, KeyError, TypeError, EOFError):  # not an entry of ours
         return None
+    mark_used(path)  # a valid entry: in use (one that is not may be pruned)
     return bakes, scenes, tuple(warnings)
 
 

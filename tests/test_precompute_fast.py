@@ -410,3 +410,18 @@ def test_a_cache_folder_loses_only_other_versions_files_unused_for_a_day(tmp_pat
     assert fileio.prune_stale(tmp_path, "batch-*.npz", "aaaa") == 0  # looked already
     assert fileio.prune_stale(tmp_path, "batch-*.npz", "aaaa", once=False) == 1
     assert not (tmp_path / "batch-cccc-k5.npz").exists()
+
+
+def test_a_batch_entry_that_is_not_valid_is_not_marked_used(tmp_path):
+    """Reading a sealed batch entry that is not one of this format (another layout
+    under the right key) is a miss and leaves its modification time alone, so that
+    pruning may take it."""
+    from geometry_precompute import batch_cache, fileio
+
+    key = "k" * 16
+    path = batch_cache.path_of(tmp_path, key)
+    path.write_bytes(fileio.seal(key, b"not an npz of ours"))
+    old = time.time() - 3 * fileio.STALE_AFTER_S
+    os.utime(path, (old, old))
+    assert batch_cache.read(tmp_path, key, 1, 1) is None
+    assert path.stat().st_mtime == pytest.approx(old, abs=1)
