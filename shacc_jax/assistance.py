@@ -26,6 +26,7 @@ from . import shapes
 from .meta import meta_target_batch, meta_target_yaw_batch, yaw_average, yaw_directions
 from .orientation import task_direction, task_orientation
 from .rollout_state import Assist, Lane, Move, State
+from .rows import row, rows
 from .trig import sincos
 from .types import ASSISTANCE, Geometry
 from .vec3 import V3, length, of, xyz
@@ -162,7 +163,7 @@ def position_assistance(lane: Lane, spaces: shapes.Prepared, p: Array, prob: Arr
     step_length = x.v_max * x.dt
     if mode == "blend":
         # Only g*'s space: one projection, not one onto every space.
-        unit, dist = _towards_each(jax.tree.map(lambda a: a[best][None], spaces), of(p))
+        unit, dist = _towards_each(jax.tree.map(lambda a: row(a, best)[None], spaces), of(p))
         size = jnp.minimum(step_length, dist[0])
         pull = xyz(lambda i: conf * size * unit[i][0])
         return Assist(conf, pull, conf >= x.blend_threshold)
@@ -220,7 +221,7 @@ def intent_orientation(g: Geometry, spaces: shapes.Prepared, lane: Lane, p: Arra
     prob, best, conf = inferred(jnp.maximum(dist, 0.0), lane.v0, g.task_mask, x.intent_beta)
     if mode == "blend":
         on = conf >= x.blend_threshold
-        goal = task_orientation(g.orient_kind[best], g.orient_quat[best], g.orient_axis[best], p)
+        goal = task_orientation(*rows((g.orient_kind, g.orient_quat, g.orient_axis), best), p)
     else:
         on = jnp.ones((), bool)
         if yaw:

@@ -37,6 +37,7 @@ from jaxtyping import Array, Bool, Float, Int
 from . import quaternion as quat
 from . import shapes
 from .orientation import task_orientation
+from .rows import rows
 from .types import AMBIGUOUS, SUCCESS, TIMEOUT, WRONG, Geometry, Params
 
 TIE = 1e-6
@@ -59,7 +60,7 @@ class Path(NamedTuple):
 
 def straight_path(spaces: shapes.Prepared, target: Int[Array, ""], p0: Float[Array, "3"],
                   step_length: Float[Array, ""], max_steps: Array) -> Path:
-    c0 = shapes.prepared_project(jax.tree.map(lambda a: a[target], spaces), p0)
+    c0 = shapes.prepared_project(rows(spaces, target), p0)
     diff = c0 - p0
     length = shapes._safe_norm(diff)
     u = jnp.where(length > 0, diff / jnp.where(length > 0, length, 1.0), 0.0)
@@ -213,7 +214,7 @@ def _rotation_scan(r0, inside, targets, max_angle, emit: bool):
 
 def target_orientation(orient, target: Int[Array, ""], p: Float[Array, "3"]) -> Array:
     kind, q_fixed, axis = orient
-    return task_orientation(kind[target], q_fixed[target], axis[target], p)
+    return task_orientation(*rows((kind, q_fixed, axis), target), p)
 
 
 def delta_r(outcome: Outcome, r: Float[Array, "4"], orient, target: Int[Array, ""]) -> Array:

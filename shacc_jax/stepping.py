@@ -32,6 +32,7 @@ from .assistance import CORRECT, WRONG, assist_position, first_assistance, prepa
 from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
+from .rows import row, rows
 from .streams import rollout_draws, rollout_key, step_key
 from .types import INTENT_MODES, Geometry, Layout, Params
 from .user_models import aim, is_perfect, move, shake
@@ -63,11 +64,10 @@ def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, whic
     """One lane's constants (vmapped over a block); with ``populations``, its drawn user
     settings. With ``intent`` (an intent mode: the robot changes the step) no lane takes
     the perfect user's straight path."""
-    pick = (lambda a: a[scene])  # noqa: E731
-    g, x, sp = (jax.tree.map(pick, t) for t in (geometry, params, spaces))
+    g, x, sp = rows(geometry, scene), rows(params, scene), rows(spaces, scene)
     dtype = geometry.starts.dtype
-    pose = g.starts[start]
-    key = rollout_key(x.user_seed, g.scene_key, target, g.start_index[start])
+    pose = row(g.starts, start)
+    key = rollout_key(x.user_seed, g.scene_key, target, row(g.start_index, start))
     if populations:
         x = with_population(key, x, dtype)
     # Drawn (or plain): the distributions are not carried in the lane's state.
@@ -76,9 +76,8 @@ def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, whic
     n = am.rollout_numbers(x, dtype)
 
     def space(task):
-        return (g.kind[task], getattr(g, f"center_{which}")[task],
-                getattr(g, f"quat_{which}")[task], getattr(g, f"dims_{which}")[task],
-                sp.trig[task])
+        return rows((g.kind, getattr(g, f"center_{which}"), getattr(g, f"quat_{which}"),
+                     getattr(g, f"dims_{which}"), sp.trig), task)
 
     path = am.straight_path(sp, target, pose[:3], n["step_length"], n["max_steps"])
     once = rollout_draws(key, dtype)
@@ -95,9 +94,9 @@ def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, whic
     ou_b = jnp.sqrt(jnp.maximum(1.0 - ou_a * ou_a, 0.0)) * x.user_noise
     switch_steps = jnp.round(x.user_mode_switch_s / x.dt)
     perfect = is_perfect(x) & (not intent)
-    return Lane(scene, target, x, pose[:3], pose[3:], g.task_mask[target], perfect,
-                step_key(key), once, space(target), g.aim_point[target],
-                path.c0, path.u, path.length, decoy, space(decoy), g.aim_point[decoy],
+    return Lane(scene, target, x, pose[:3], pose[3:], row(g.task_mask, target), perfect,
+                step_key(key), once, space(target), row(g.aim_point, target),
+                path.c0, path.u, path.length, decoy, space(decoy), row(g.aim_point, decoy),
                 ou_a.astype(dtype), ou_b.astype(dtype), switch_steps.astype(jnp.int32))
 
 
@@ -180,8 +179,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     lanes = partial(jax.vmap, in_axes=-1, out_axes=-1)
 
     def landing(s, n, t):
-        x = am.rollout_numbers(jax.tree.map(lambda a: a[s], params), dtype)
-        path = am.straight_path(jax.tree.map(lambda a: a[s], spaces), t,
+        x = am.rollout_numbers(rows(params, s), dtype)
+        path = am.straight_path(rows(spaces, s), t,
                                 geometry.starts[s, n, :3], x["step_length"], x["max_steps"])
         return jnp.where(geometry.task_mask[s, t], path.landing, -1.0)
 
@@ -197,9 +196,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     hulls = Hulls.of(geometry) if layout.collision_checks else None
 
     def scene_of(scene) -> SceneView:
-        pick = (lambda a: a[scene])  # noqa: E731
-        return SceneView(jax.tree.map(pick, per_lane), jax.tree.map(pick, spaces),
-                         None if meta is None else jax.tree.map(pick, meta), hulls)
+        return SceneView(rows(per_lane, scene), rows(spaces, scene),
+                         None if meta is None else rows(meta, scene), hulls)
 
     def checked(ln, p, r, step=None, sd=None):
         return check(scene_of(ln.scene), ln, p, r, layout, track, step, sd, intent)
