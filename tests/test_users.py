@@ -90,10 +90,12 @@ def test_carrying_user_models_a_scene_does_not_use_changes_nothing(scenes):
     """A program that carries the joystick's state and the change of mind's (because
     some other scene of its batch needs them) gives a scene whose user has neither the
     same rollouts, bit for bit: batches that mix users (the reproduction's robustness
-    section evaluates every level in one) answer as a batch per user would."""
-    baked = _bake(scenes[:2], USERS["wander"])
-    alone = _evaluate(baked)
-    carried = _evaluate(baked, joystick=True, switching=True)
+    section evaluates every level in one) answer as a batch per user would. (The two
+    programs are those of the perfect user stepped and of the accelerators' scheme
+    below: the same layouts, so the suite compiles them once.)"""
+    baked = _bake(scenes, USERS["wander"])
+    alone = _evaluate(baked, lanes_per_block=40)
+    carried = _evaluate(baked, joystick=True, switching=True, lanes_per_block=40)
     for name in alone.rollouts._fields:
         a, b = getattr(alone.rollouts, name), getattr(carried.rollouts, name)
         assert np.array_equal(a, b, equal_nan=True), name
