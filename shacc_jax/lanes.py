@@ -124,10 +124,11 @@ def run_queue(order: Int[Array, " L"], n_real: Int[Array, ""], slots: int, refil
     lanes ``ids`` (slots on the last axis; ``occupied`` false for empty slots), the
     state with a boolean ``live``. ``step(state, lane) -> state``: one step of every
     slot (an ended lane's step must change nothing). ``finish(lane, state) -> rows``:
-    one lane's answers, the leaves of ``result`` (L, ...) less their first axis. Each
-    loop iteration takes ``unroll`` steps, then, once 1 / ``refill_share`` of the
-    slots are free (or none is live), the ended slots write their answers and take
-    the next lanes."""
+    one lane's answers, the leaves of ``result`` (L, ...) less their first axis. The
+    slots start empty. Each loop iteration first refills, once 1 / ``refill_share`` of
+    the slots are open (or none is live): the ended slots write their answers, and
+    they and the empty ones take the next lanes (at the start, until every slot holds
+    one); then it takes ``unroll`` steps."""
     L = jax.tree.leaves(result)[0].shape[0]
     B = slots
     R = max(1, B // refill_share)
@@ -140,15 +141,21 @@ def run_queue(order: Int[Array, " L"], n_real: Int[Array, ""], slots: int, refil
         return jax.tree.map(lambda a, v: a.at[at].set(v, mode="drop", unique_indices=True),
                             result, done)
 
+    def open_slots(c: _Queue) -> Array:
+        """The slots that may take a lane: ended ones, and while the queue still holds
+        lanes, empty ones (every slot at the start)."""
+        return ~c.state.live & ((c.slot >= 0) | (c.next < n_real))
+
     def refill(c: _Queue) -> _Queue:
-        """Slots whose rollout has ended write it and take the next lanes of the
+        """Up to R open slots write their ended rollouts and take the next lanes of the
         queue."""
         state = c.state
-        free = (c.slot >= 0) & ~state.live
+        free = open_slots(c)
         idx, at, _ = first_true(free, R)
         n_free = jnp.minimum(jnp.sum(free, dtype=jnp.int32), R)
         taking = jnp.arange(R, dtype=jnp.int32)
-        result = write(c.result, c.slot, c.lane, state, idx, taking < n_free)
+        result = write(c.result, c.slot, c.lane, state, idx,
+                       (taking < n_free) & (c.slot[idx] >= 0))
         n_new = jnp.minimum(n_free, n_real - c.next)
         new = taking < n_new
         ids = order[jnp.minimum(c.next + taking, L - 1)]
@@ -158,25 +165,37 @@ def run_queue(order: Int[Array, " L"], n_real: Int[Array, ""], slots: int, refil
         return _Queue(jax.tree.map(put, c.lane, lane_new), jax.tree.map(put, state, state_new),
                       slot, c.next + n_new, result)
 
+    def refills(c: _Queue) -> _Queue:
+        """Refill once 1 / ``refill_share`` of the slots are open (or none is live):
+        once an iteration, and at the start until every slot holds a lane. One traced
+        refill (and ``begin``) serves both: starting from a full first ``begin`` of
+        every slot compiled it twice (a quarter of a stepped program's compile time on
+        the 2-core CPU)."""
+        def more(x):
+            k, c = x
+            n_free = jnp.sum(open_slots(c), dtype=jnp.int32)
+            wanted = (n_free >= R) | (~jnp.any(c.state.live) & (n_free > 0))
+            return wanted & ((k == 0) | (c.next < jnp.minimum(n_real, B)))
+
+        return jax.lax.while_loop(more, lambda x: (x[0] + 1, refill(x[1])), (0, c))[1]
+
     def body(c: _Queue) -> _Queue:
+        c = refills(c)
         state = c.state
         for _ in range(unroll):  # steps of ended lanes change nothing
             state = step(state, c.lane)
-        # The iteration's states are made before the refill's test reads them: on an
-        # accelerator XLA then keeps the last step's work out of the fusions after it
+        # The iteration's states are made before the next refill's test reads them: on
+        # an accelerator XLA then keeps the last step's work out of the fusions after it
         # (an H200, 10 000 scenes: the three intent modes 3.231 -> 3.092 s, compile
         # 170 -> 136 s; every user setting 1.179 -> 1.163 s). A barrier after every
         # step was slower (shacc_ho 1.609 -> 1.887 s). XLA's CPU backend drops it.
-        state = jax.lax.optimization_barrier(state)
-        c = c._replace(state=state)
-        # Refilling touches every lane array: done once enough slots are free (or none
-        # is live), not every step.
-        n_free = jnp.sum((c.slot >= 0) & ~state.live, dtype=jnp.int32)
-        return jax.lax.cond((n_free >= R) | ~jnp.any(state.live), refill, lambda c: c, c)
+        return c._replace(state=jax.lax.optimization_barrier(state))
 
+    # Every slot empty (not live, no lane): the first iteration's refills fill them.
     first = jnp.arange(B, dtype=jnp.int32)
-    lane, state = begin(order[first], first < n_real)
-    init = _Queue(lane, state, jnp.where(first < n_real, order[first], -1),
-                  jnp.minimum(n_real, B), result)
+    lane, state = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype),
+                               jax.eval_shape(begin, first, first < 0))
+    state = state._replace(live=jnp.zeros(B, bool))
+    init = _Queue(lane, state, jnp.full(B, -1, jnp.int32), jnp.zeros((), jnp.int32), result)
     end = jax.lax.while_loop(lambda c: jnp.any(c.state.live) | (c.next < n_real), body, init)
     return write(end.result, end.slot, end.lane, end.state, first, end.slot >= 0)
