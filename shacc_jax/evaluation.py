@@ -294,15 +294,27 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     numbers, and the meta skill turns only R: without collision checks (where R moves
     the gripper's capsules) their paths and outcomes are the same, so one pass with the
     meta skill serves both, as the closed form's activation pass does, and the
-    shrinking mode keeps the start's R and no meta steps."""
+    shrinking mode keeps the start's R and no meta steps. Where ``stepping.FOLD`` says
+    so (CPUs), baseline runs in shacc's pass (or shrinking's) and ho in shacc_ho's
+    (``stepping.folded_pass``): one loop fewer to compile, the same bits."""
     modes = layout.modes
+    backend = jax.default_backend()
     shared = "shrinking" in modes and "shacc" in modes and not layout.collision_checks
+    run = [m for m in modes if not (m == "shrinking" and shared)]
+    folded: dict[str, str] = {}  # a mode run in its partner's pass (stepping.folded_pass)
+    if stepping.FOLD.get(backend, stepping.FOLD["accelerator"]):
+        for mode in run:
+            into = [m for m in stepping.FOLDS.get(mode, ()) if m in run and m not in folded
+                    and m not in folded.values()]
+            if into:
+                folded[mode] = into[0]
     passes = {}
-    for mode in modes:
-        if mode == "shrinking" and shared:
-            continue
-        passes[mode] = stepping.stepped_pass(geometry, params, layout, mode,
-                                             jax.default_backend())
+    for mode in run:
+        if mode in folded:
+            passes[mode], passes[folded[mode]] = stepping.folded_pass(
+                geometry, params, layout, mode, folded[mode], backend)
+        elif mode not in folded.values():  # else computed with the mode folded into it
+            passes[mode] = stepping.stepped_pass(geometry, params, layout, mode, backend)
     if shared:
         out = passes["shacc"][0]
         S, N, T = out.code.shape

@@ -56,6 +56,28 @@ REFILL_SHARE = 4
 # s to compile against 31 s); with the shares above and refills of a quarter of the
 # slots (were a sixteenth), 0.971 s.
 STEPPING = {"cpu": 1, "accelerator": 8}
+# Per kind of mode, whether an iteration's steps are a loop of one traced step
+# (``lanes.run_queue``; XLA knows its trip count, so it adds no round trip) rather than
+# each step traced and compiled on its own. On an H100 (10.8 M rollouts, two calls,
+# 2026-12-07): every user setting ran 1.282-1.284 s with the loop against 1.322 s
+# unrolled, and compiled in 12.9-13.6 s against 41-46 s. The intent modes ran 4.093 s
+# with the loop (19 s to compile), 3.843 s with two steps unrolled in it (27 s),
+# against 3.517 s unrolled (69 s): XLA fuses across their unrolled steps, so they keep
+# them.
+ROLLED = {"meta": True, "other": True, "intent": False}
+# Per backend, whether a mode on the initial spaces without the meta skill runs in the
+# pass of its partner (FOLDS) rather than in a loop of its own: one loop fewer to
+# compile. On the 2-core CPU (benchmarks/bench_phases.py, three shipped scenes), the
+# program with every user setting for the paper's three modes traced, lowered and
+# compiled in 6.7-6.8 s against 9.4-10.5 s (benchmarks/RESULTS.md). On an
+# H100 (as above) it saved 5 s of the 13 s compile but ran 1.296 s against 1.282 s, and
+# the intent modes 4.94 s against 4.09 s: accelerators keep a loop per mode.
+FOLD = {"cpu": True, "accelerator": False}
+# The modes that run in a partner's pass (:func:`folded_pass`), partners in order of
+# preference: the partner with no clusters and its optimised spaces set to the initial
+# ones steps exactly as the mode does (no meta region, so the meta skill never turns
+# R; shacc_ho is then ho).
+FOLDS = {"baseline": ("shacc", "shrinking"), "ho": ("shacc_ho",)}
 
 
 def _make_lane(geometry: Geometry, params: Params, spaces: shapes.Prepared, which: str,
@@ -187,8 +209,8 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
     order = jnp.argsort(-jax.vmap(landing)(scene, start, task)).astype(jnp.int32)
     n_real = (jnp.sum(geometry.task_mask) * N).astype(jnp.int32)
     B = min(lanes_per_block, L)
-    share, unroll = layout.stepping or (FULL_CHECK_SHARE["intent" if intent else "meta"
-                                                         if track else "other"],
+    kind = "intent" if intent else "meta" if track else "other"
+    share, unroll = layout.stepping or (FULL_CHECK_SHARE[kind],
                                         STEPPING[backend if backend in STEPPING
                                                  else "accelerator"])
     F = max(1, B // share)
@@ -312,7 +334,7 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
                     jnp.zeros(L, jnp.int32), jnp.zeros((L, 3), dtype), jnp.zeros(L, dtype),
                     jnp.zeros((L, 4), dtype), jnp.zeros(L, jnp.int32), *counters)
     result = scheduler.run_queue(order, n_real, B, REFILL_SHARE, unroll, begin, step,
-                                 finish, result)
+                                 finish, result, ROLLED[kind])
     out = am.Outcome(result.code, result.activated, result.step, result.point,
                      result.path_length)
     parts: tuple = (out, result.r, result.meta_steps)
@@ -322,3 +344,23 @@ def stepped_pass(geometry: Geometry, params: Params, layout: Layout, mode: str,
         parts += (jnp.stack([result.step - scene_steps - correct - wrong, scene_steps, correct,
                              wrong], axis=-1),)
     return jax.tree.map(lambda a: a.reshape(S, N, T, *a.shape[1:]), parts)
+
+
+def folded_pass(geometry: Geometry, params: Params, layout: Layout, mode: str, into: str,
+                backend: str = "cpu") -> tuple[tuple, tuple]:
+    """:func:`stepped_pass` of ``mode`` and of its partner ``into`` (:data:`FOLDS`) in one
+    loop: the lanes of ``into`` and those of a copy of every scene without clusters
+    whose optimised spaces are its initial ones, on which ``into`` steps as ``mode``
+    does (same scene keys, so the same random numbers). Returns (``mode``'s parts,
+    ``into``'s parts), each as :func:`stepped_pass` gives them."""
+    if into not in FOLDS.get(mode, ()):
+        raise ValueError(f"mode {mode!r} cannot run in the pass of {into!r} "
+                         f"(stepping.FOLDS: {FOLDS})")
+    S = geometry.starts.shape[0]
+    plain = geometry._replace(center_opt=geometry.center_init, quat_opt=geometry.quat_init,
+                              dims_opt=geometry.dims_init,
+                              cluster=jnp.full_like(geometry.cluster, -1))
+    both = stepped_pass(jax.tree.map(lambda a, b: jnp.concatenate([a, b]), plain, geometry),
+                        jax.tree.map(lambda a: jnp.concatenate([a, a]), params), layout, into,
+                        backend)
+    return jax.tree.map(lambda a: a[:S], both), jax.tree.map(lambda a: a[S:], both)

@@ -193,24 +193,48 @@ def test_stepped_users_agree_with_the_reference(scenes, name):
         not np.allclose(perfect.rollouts.point, ev.rollouts.point, equal_nan=True)
 
 
-def test_the_accelerators_stepping_gives_the_same_rollouts(scenes):
+@pytest.fixture(scope="module")
+def mixed(scenes):
+    """A batch that mixes perfect users with imperfect ones (every parameter, and aiming
+    at the object with noise and a change of mind), and its stepped evaluation in the
+    paper's three modes with the CPU's scheme."""
+    users_per_scene = [{}, USERS["all"], {}, USERS["object-noisy"]]
+    baked = bake([replace(r, settings=r.settings.with_overrides(o))
+                  for r, o in zip(scenes, users_per_scene, strict=True)])
+    return baked, _evaluate(baked, stepped_users=True, lanes_per_block=40)
+
+
+def test_the_accelerators_stepping_gives_the_same_rollouts(mixed):
     """The accelerators step differently (several steps per loop iteration,
     stepping.STEPPING); run here on the CPU (Layout.stepping), with every lane checked in
     full each step, their rollouts equal the CPU's scheme (a share of lanes gathered and
     checked, one step per iteration) bit for bit, in every mode, on a batch that mixes
     perfect users with imperfect ones (the schemes differ in the loop, not in a step's
-    check). Two steps per iteration stand for the accelerators' eight: the iteration
-    repeats one traced step that many times (``lanes.run_queue``), and each copy is
-    more to compile (this test on 2 cores: 82 s with eight, 58 s with two)."""
-    users_per_scene = [{}, USERS["all"], {}, USERS["object-noisy"]]
-    baked = bake([replace(r, settings=r.settings.with_overrides(o))
-                  for r, o in zip(scenes, users_per_scene, strict=True)])
-    ours = _evaluate(baked, stepped_users=True, lanes_per_block=40)
+    check). Two steps per iteration stand for the accelerators' eight: the paper's
+    modes run them as a loop of one traced step (``stepping.ROLLED``), the intent
+    modes unrolled, each copy more to compile."""
+    baked, ours = mixed
     theirs = _evaluate(baked, stepped_users=True, lanes_per_block=40, stepping=(1, 2))
     assert stepping.STEPPING["accelerator"] > 1 and stepping.STEPPING["cpu"] == 1
     for field in ours.rollouts._fields:
         a, b = getattr(ours.rollouts, field), getattr(theirs.rollouts, field)
         assert np.array_equal(a, b, equal_nan=True), field
+
+
+def test_baseline_folded_into_shaccs_pass_steps_as_alone(mixed):
+    """On a CPU (stepping.FOLD) baseline runs in shacc's pass, on a copy of each scene
+    without clusters whose optimised spaces are its initial ones: its rollouts, and
+    shacc's, equal those of programs where each mode has its pass to itself (no partner
+    in the batch), bit for bit, on the mixed batch. (ho runs in shacc_ho's pass the same
+    way; test_intent holds its every rollout to the NumPy Automaton's.)"""
+    assert stepping.FOLD["cpu"] and "shacc" in stepping.FOLDS["baseline"]
+    baked, ours = mixed
+    for mode in ("baseline", "shacc"):
+        alone = _evaluate(baked, stepped_users=True, lanes_per_block=40, modes=(mode,))
+        i = shacc_jax.MODES.index(mode)
+        for field in ours.rollouts._fields:
+            a, b = getattr(ours.rollouts, field)[:, i], getattr(alone.rollouts, field)[:, 0]
+            assert np.array_equal(a, b, equal_nan=True), (mode, field)
 
 
 def test_swept_activation_does_not_depend_on_the_speed(scenes):
