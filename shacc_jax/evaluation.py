@@ -304,7 +304,7 @@ def _stepped(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
     folded: dict[str, str] = {}  # a mode run in its partner's pass (stepping.folded_pass)
     if stepping.FOLD.get(backend, stepping.FOLD["accelerator"]):
         for mode in run:
-            into = [m for m in stepping.FOLDS.get(mode, ()) if m in run and m not in folded
+            into = [m for m in stepping.FOLDS.get(mode, ()) if m in run
                     and m not in folded.values()]
             if into:
                 folded[mode] = into[0]
