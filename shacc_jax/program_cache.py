@@ -21,8 +21,10 @@ from __future__ import annotations
 import contextlib
 import gc
 import hashlib
+import logging
 import os
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -45,6 +47,10 @@ from geometry_precompute.fileio import (
 _DIR: Path | None = None
 _SOURCE_HASH: str | None = None
 _LOADED: dict[str, Callable] = {}  # key -> the deserialised program, jitted, this process
+# Each program a process prepares (traced or read back, then compiled) is told at INFO,
+# with its seconds: a command's progress lines (``shacc reproduce`` shows them); a
+# library user sees them only after configuring ``logging``.
+LOG = logging.getLogger("shacc_jax.programs")
 _QUICK: dict[str, Callable] = {}  # name -> the jitted function compiled with QUICK_OPTIONS
 _QUICK_LOCK = threading.Lock()  # ahead()'s threads may ask for the same name at once
 
@@ -159,7 +165,7 @@ def call(name: str, jitted: Callable, static: dict, args: tuple, out_example, *,
     leaves, in_tree = jax.tree.flatten(args)
     if _DIR is None:
         return compiled_as(name, jitted, tuple(static), work, leaves)(*args, **static)
-    run = _loaded(_DIR, name, jitted, static, in_tree, leaves, _options(work, leaves))
+    run = _loaded(_DIR, name, jitted, static, in_tree, leaves, _options(work, leaves), work)
     return jax.tree.unflatten(jax.tree.structure(out_example), run(*leaves))
 
 
@@ -208,9 +214,8 @@ def ahead(name: str, jitted: Callable, static: dict,
                 program = compiled_as(name, jitted, tuple(static), work, leaves)
                 program.lower(*args, **static).compile()
             else:
-                program = _loaded(_DIR, name, jitted, static, in_tree, leaves,
-                                  _options(work, leaves))
-                program.lower(*leaves).compile()
+                _loaded(_DIR, name, jitted, static, in_tree, leaves, _options(work, leaves),
+                        work)
 
     signatures = []  # the program of each call: its key, and its options
     for args, work in calls:
@@ -233,13 +238,17 @@ def ahead(name: str, jitted: Callable, static: dict,
 
 
 def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
-            leaves: list, options: dict | None) -> Callable:
-    """The jitted program of a call: this process's, else the one exported to
-    ``folder``, else traced and exported now."""
+            leaves: list, options: dict | None, work: int | None = None) -> Callable:
+    """The jitted program of a call, compiled for ``leaves``: this process's, else the
+    one exported to ``folder``, else traced and exported now (each new one told on
+    :data:`LOG`)."""
     key = program_key(name, tuple(sorted(static.items())), in_tree, leaves)
     loaded = key if options is None else f"{key}-quick"  # one export, either options
     run = _LOADED.get(loaded)
     if run is None:
+        t0 = time.perf_counter()
+        size = "" if work is None else f" ({work:,} rollouts of work)"
+        LOG.info("%s program%s: preparing", name, size)
         version = _source_hash()[:16]
         path = folder / f"export-{name}-{version}-{key}.bin"
         exp = None
@@ -253,6 +262,7 @@ def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
                 mark_used(path)
             except Exception:  # written by another jax: rebuilt
                 exp = None
+        traced = exp is None
         if exp is None:
             def flat(*xs):
                 return tuple(jax.tree.leaves(jitted(*jax.tree.unflatten(in_tree, xs),
@@ -264,7 +274,13 @@ def _loaded(folder: Path, name: str, jitted: Callable, static: dict, in_tree,
             # Any code change makes new keys: other versions' programs unused for a
             # day go.
             prune_stale(folder, "export-*.bin", version)
-        run = _LOADED[loaded] = jax.jit(exp.call, compiler_options=options)
+        run = jax.jit(exp.call, compiler_options=options)
+        t1 = time.perf_counter()
+        run.lower(*leaves).compile()  # the call finds it (a compilation cache hit, or XLA)
+        LOG.info("%s program%s: %s in %.1f s, compiled in %.1f s", name, size,
+                 "traced" if traced else "read back", t1 - t0,
+                 time.perf_counter() - t1)
+        _LOADED[loaded] = run
     return run
 
 

@@ -255,6 +255,32 @@ def test_a_given_search_is_used_not_run_again(small_search, monkeypatch):
     np.testing.assert_array_equal(again.rollouts.outcome, ref.rollouts.outcome)
 
 
+def test_a_small_batchs_optimized_mode_runs_in_the_paper_modes_program(small_search):
+    """A small batch evaluates the optimized mode in the program of the paper's modes
+    that it has just run (nothing more is traced or compiled), with the same bits as
+    in a program of its own."""
+    _, baked, found = small_search
+    paper = ("baseline", "shrinking", "shacc")
+    run(baked, paper)
+    traced: list[float] = []
+
+    def count(event: str, duration: float, **kwargs) -> None:
+        if event == "/jax/core/compile/jaxpr_trace_duration":
+            traced.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        both, _ = run(baked, (*paper, "optimized"), found=found)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+    assert traced == []
+    alone, _ = run(baked, ("optimized",), found=found)
+    for name, got in both.rollouts._asdict().items():
+        np.testing.assert_array_equal(got[:, 3], getattr(alone.rollouts, name)[:, 0],
+                                      err_msg=name)
+    np.testing.assert_array_equal(both.metrics.u_scene[:, 3], alone.metrics.u_scene[:, 0])
+
+
 def test_cut_cuts_every_task_axis(shipped_results):
     """``cut`` takes scenes and their first n tasks: every array whose second axis is
     the tasks (by the bake's shapes, padded to 5 tasks) becomes n long there, and

@@ -4,6 +4,7 @@ list of calls' programs side by side, once each."""
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from functools import partial
@@ -22,7 +23,11 @@ def evaluate(baked):
     return shacc_jax.run(baked).evaluation  # through the program cache, NumPy results
 
 
-def test_exported_program_equals_plain_jit(shipped_bake, tmp_path):
+def test_exported_program_equals_plain_jit(shipped_bake, tmp_path, caplog):
+    """The exported program gives the plain jit's answers: traced and stored, read back
+    as a new process would, and rebuilt over a damaged entry. Each program a process
+    prepares is told on the programs' logger, traced or read back."""
+    caplog.set_level(logging.INFO, logger=program_cache.LOG.name)
     previous = program_cache.get_dir()  # an earlier in-process `main()` may have set one
     program_cache.set_dir(None)
     plain = evaluate(shipped_bake)
@@ -33,11 +38,17 @@ def test_exported_program_equals_plain_jit(shipped_bake, tmp_path):
     stale.write_bytes(b"old")
     os.utime(stale, (time.time() - 2 * 86400, time.time() - 2 * 86400))
     try:
+        caplog.clear()
         first = evaluate(shipped_bake)          # exports and stores
+        told = [r.getMessage() for r in caplog.records]
+        assert len(told) == 2 and told[0].startswith("evaluate program (")
+        assert told[0].endswith(": preparing") and " traced in " in told[1]
         assert not stale.exists()
         (entry,) = tmp_path.glob("export-evaluate-*.bin")
         program_cache.forget_loaded()            # as a new process would
+        caplog.clear()
         second = evaluate(shipped_bake)         # deserialises
+        assert " read back in " in caplog.records[-1].getMessage()
         entry.write_bytes(b"damaged")
         program_cache.forget_loaded()
         third = evaluate(shipped_bake)          # rebuilt over the damaged entry

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import re
 
 import pytest
 
@@ -16,11 +19,31 @@ def quick_run(tmp_path_factory):
     readme = tmp_path_factory.mktemp("readme") / "README.md"  # not in --out: not its file
     readme.write_text(f"# x\n\n{README_BEGIN}\nold\n{README_END}\n\ntail\n")
     # A small search (the optimized mode's defaults are measured in benchmarks).
-    assert main(["reproduce", "--quick", "--random-scenes", "2", "--field-grid", "6",
-                 "--workers", "1", "--out", str(out), "--readme", str(readme),
-                 "--set", "optimize_population=8", "--set", "optimize_generations=3",
-                 "--set", "optimize_starts=16"]) == 0
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["reproduce", "--quick", "--random-scenes", "2", "--field-grid", "6",
+                     "--workers", "1", "--out", str(out), "--readme", str(readme),
+                     "--set", "optimize_population=8", "--set", "optimize_generations=3",
+                     "--set", "optimize_starts=16"]) == 0
+    PROGRESS.append(err.getvalue())
     return out, readme
+
+
+PROGRESS: list[str] = []  # the quick run's stderr
+
+
+def test_every_program_is_a_progress_line(quick_run):
+    """Compiling is most of the command's time: each program prepared says so when it
+    starts and how long its trace and compilation took, named after its stage."""
+    lines = PROGRESS[0].splitlines()
+    done = [ln for ln in lines if re.search(r"program \([\d,]+ rollouts of work\): "
+                                           r"(traced|read back) in [\d.]+ s, compiled in "
+                                           r"[\d.]+ s$", ln)]
+    for stage in ("robustness: ", "intent: ", "success fields: "):
+        assert any(f"]   {stage}evaluate program" in ln for ln in done), stage
+    assert any("search program" in ln for ln in done)
+    started = [ln for ln in lines if ln.endswith(": preparing")]
+    assert len(started) == len(done) >= 5
 
 
 def test_summary_keys(quick_run):

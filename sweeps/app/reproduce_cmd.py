@@ -16,7 +16,9 @@ of the spaces the search found (the same booleans as C_final).
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata as md
+import logging
 import os
 import platform
 import sys
@@ -43,6 +45,7 @@ from geometry_precompute.batch import precompute_scene
 from geometry_precompute.clutteredness import clutteredness
 from geometry_precompute.schema import ASSISTANCE, PAPER_MODES
 from shacc_jax.optimize import winner_name
+from shacc_jax.program_cache import LOG as PROGRAMS
 from shacc_jax.types import Search
 from sweeps.analysis import claims, intent, plots, robustness
 from sweeps.analysis.stats import format_ci, mean_ci, partial_corr_ci, pearson_ci
@@ -82,6 +85,31 @@ def _log(*parts) -> None:
     line = " ".join([f"[{time.perf_counter() - _BEGUN:6.1f} s]", *map(str, parts)])
     sys.stderr.write(line + "\n")
     sys.stderr.flush()
+
+
+class _ProgramLines(logging.Handler):
+    """Each program's preparation (``shacc_jax.program_cache.LOG``) as a progress line,
+    named after the stage whose thread prepared it."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        thread = threading.current_thread().name
+        stage = thread.removeprefix("reproduce ") + ": " if thread.startswith("reproduce ") \
+            else ""
+        _log(f"  {stage}{record.getMessage()}")
+
+
+@contextlib.contextmanager
+def _programs_told():
+    """Progress lines for the programs prepared within (compiling is most of the
+    command's time: without them a stage would be silent for a minute)."""
+    handler, level = _ProgramLines(logging.INFO), PROGRAMS.level
+    PROGRAMS.addHandler(handler)
+    PROGRAMS.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        PROGRAMS.removeHandler(handler)
+        PROGRAMS.setLevel(level)
 
 
 def side_by_side(stages: dict[str, Callable[[int], Any]]) -> dict[str, tuple[Any, float]]:
@@ -640,8 +668,10 @@ def cmd_reproduce(args) -> int:
     n_random = args.random_scenes if args.random_scenes is not None else (4 if args.quick
                                                                            else 20)
     grid = args.field_grid if args.field_grid is not None else (16 if args.quick else 64)
-    summary = run(Path(args.out), n_random, args.seed, args.quick, grid, parse_sets(args.set),
-                  args.workers, Path(args.readme) if args.readme else None, args.preset)
+    with _programs_told():
+        summary = run(Path(args.out), n_random, args.seed, args.quick, grid,
+                      parse_sets(args.set), args.workers,
+                      Path(args.readme) if args.readme else None, args.preset)
     print(claims.markdown(summary["claims"]))
     print()
     print(partial_sentence(summary))
