@@ -234,8 +234,12 @@ def rollout_numbers(params: Params, dtype) -> dict:
 def activation_pass(geometry: Geometry, params: Params, which: str):
     """Phase 1 for one scene: (path, activation, outcome), each (N, T, ...), on the
     ``init`` or ``opt`` spaces."""
+    return activation_pass_on(geometry, params, geometry.spaces(which))
+
+
+def activation_pass_on(geometry: Geometry, params: Params, spaces):
+    """:func:`activation_pass` on the prepared ``spaces`` (``Geometry.spaces``)."""
     x = rollout_numbers(params, geometry.starts.dtype)
-    spaces = geometry.spaces(which)
 
     def one(p0, target):
         path = straight_path(spaces, target, p0, x["step_length"], x["max_steps"])

@@ -245,20 +245,25 @@ def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
         jnp.where(found, jnp.minimum(k * path.step_length, path.length), out.path_length))
 
 
-def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps, assist=None
+def _with_assist(out: am.Outcome, r, meta_steps, assist=None) -> tuple:
+    """A mode's (Outcome, R, meta steps, assistance): ``assist``, the steps under each
+    kind of assistance (..., 4), where the mode counts them; else the paper's modes':
+    the meta skill's steps are the scene's, the rest none."""
+    if assist is None:
+        zero = jnp.zeros_like(meta_steps)
+        assist = jnp.stack([out.step - meta_steps, meta_steps, zero, zero], axis=-1)
+    return out, r, meta_steps, assist
+
+
+def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps, assist
               ) -> Rollouts:
-    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T, U);
-    ``assist``: the steps under each kind of assistance, (N, T, 4), where the mode
-    counts them; else the paper's modes': the meta skill's steps are the scene's, the
-    rest none)."""
+    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T,
+    U); the rest :func:`_with_assist`'s, (N, T, ...))."""
     T = geometry.task_mask.shape[0]
     orient = (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis)
     dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
         out, r, orient, jnp.arange(T, dtype=jnp.int32))
     code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
-    if assist is None:
-        zero = jnp.zeros_like(meta_steps)
-        assist = jnp.stack([out.step - meta_steps, meta_steps, zero, zero], axis=-1)
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
                     r, drawn, assist)
 
@@ -329,11 +334,16 @@ def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tup
     """Per mode (Outcome, R, meta steps) of the perfect user: the activation pass in
     closed form, then the lane pass where the mode tracks or collisions are checked."""
     modes = layout.modes
-    passes = {}
-    if "baseline" in modes:
-        passes["init"] = jax.vmap(partial(am.activation_pass, which="init"))(geometry, params)
-    if "shrinking" in modes or "shacc" in modes:
-        passes["opt"] = jax.vmap(partial(am.activation_pass, which="opt"))(geometry, params)
+    which = (["init"] if "baseline" in modes else []) + (
+        ["opt"] if "shrinking" in modes or "shacc" in modes else [])
+
+    def per_scene(g: Geometry, p: Params):
+        # Both kinds of spaces in one vmap: the pass is traced and compiled once.
+        spaces = jax.tree.map(lambda *xs: jnp.stack(xs), *[g.spaces(w) for w in which])
+        return jax.vmap(partial(am.activation_pass_on, g, p))(spaces)
+
+    both = jax.vmap(per_scene)(geometry, params)  # (S, len(which), N, T, ...)
+    passes = {w: jax.tree.map(lambda a, i=i: a[:, i], both) for i, w in enumerate(which)}
     S_all, N = geometry.starts.shape[:2]
     T = geometry.task_mask.shape[1]
     r0 = jnp.broadcast_to(geometry.starts[:, :, None, 3:], (S_all, N, T, 4))
@@ -402,8 +412,11 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     S_all, N = geometry.starts.shape[:2]
     drawn = (jax.vmap(populations.drawn_values)(geometry, params) if layout.populations else
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
-    per_mode = [jax.vmap(_assemble)(geometry, drawn, *one) for one in per_mode]
-    rollouts = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1), *per_mode)
+    # The modes stacked (S, M, ...) and assembled in one vmap: traced once, not per mode.
+    stacked = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1),
+                           *[_with_assist(*one) for one in per_mode])
+    rollouts = jax.vmap(jax.vmap(_assemble, (None, None, 0, 0, 0, 0)))(geometry, drawn,
+                                                                      *stacked)
     result = Evaluation(rollouts, batch_metrics(rollouts, geometry.task_mask, params.dt))
     if points:
         result = jax.tree.map(lambda a: a.reshape(points, S, *a.shape[1:]), result)
