@@ -209,7 +209,10 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
     # The intent section needs only the random scenes: it starts now, beside the
     # main evaluation and the later stages (a third of the memory budget each), and
     # fills the cores they leave free.
-    share = max(1, shacc_jax.budget() // 3)
+    # The budget is read once: read again while a stage runs, it would count that
+    # stage's memory as taken.
+    budget = shacc_jax.budget()
+    share = max(1, budget // 3)
     early: dict[str, Callable[[int], Any]] = {}
     if n_random:  # the paper's open question, on its random scenes
         early["intent"] = lambda budget_bytes: intent.run(
@@ -220,7 +223,7 @@ def run(out: Path, n_random: int = 20, seed: int = 0, quick: bool = False,
         _log(f"evaluating all rollouts: the paper's modes, then the optimized mode's search (one "
              f"program per task count, {', '.join(map(str, counts))}, compiled side by side)...")
         ev = evaluate_results(results, MODES, max_tasks=max(len(r.spaces) for r in results),
-                              budget_bytes=max(1, shacc_jax.budget() - share * len(early)))
+                              budget_bytes=max(1, budget - share * len(early)))
         me = ev.evaluation.metrics
         n_rollouts = int(me.n_rollouts.sum())
         t_eval = time.perf_counter()
