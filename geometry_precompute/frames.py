@@ -41,6 +41,26 @@ def quat_of_approach(a) -> tuple[float, float, float, float]:
     return quat_of_rotation(_frame_rows(a))
 
 
+def random_quats(n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, 4) uniformly random rotations, bit for bit those of
+    ``quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())`` and drawing the same
+    numbers from ``rng``: scipy's method written out (four normal draws a rotation as
+    x, y, z, w, normalised, then its matrix), each converted by
+    :func:`quat_of_rotation`. Without scipy: importing scipy.spatial was a tenth of a
+    warm ``shacc evaluate`` (tests/test_precompute_fast.py holds the bits)."""
+    s = rng.normal(size=(n, 4))
+    x, y, z, w = s[:, 0], s[:, 1], s[:, 2], s[:, 3]
+    norm = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    m = np.stack([x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw),
+                  2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw),
+                  2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2], axis=-1)
+    return np.array([quat_of_rotation(r) for r in m.reshape(n, 3, 3)],
+                    dtype=np.float64).reshape(n, 4)
+
+
 def _from_matrix(m: np.ndarray):
     # scipy.spatial is imported on first use: it is a third of a second, and importing
     # the package (as the JAX half does for the bake's schema) should not pay it.

@@ -4,9 +4,10 @@ A grid of n_y x n_z points on the vertical plane x = min(object x) - offset,
 y in [y_c - w, y_c + w] (y_c the mean object y), z in the height band, ordered
 y-major (for each y ascending, every z ascending). A grid of one point along
 an axis takes the middle of its range. Orientations: one uniformly random
-rotation per grid point from ``numpy.random.default_rng(seed)`` through
-scipy's ``Rotation.random`` (so they depend on the seed and grid size only,
-not on the scene), or frame_from_approach((1, 0, 0)) for ``"forward"``.
+rotation per grid point from ``numpy.random.default_rng(seed)``, scipy's
+``Rotation.random`` to the bit (``frames.random_quats``; so they depend on the seed
+and grid size only, not on the scene), or frame_from_approach((1, 0, 0)) for
+``"forward"``.
 
 The ``optimized`` mode's search scores candidates on other starts (reference/model):
 ``optimize_starts`` positions drawn uniformly on the same rectangle of the same plane,
@@ -21,7 +22,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .frames import frame_from_approach, quat_from_matrix
+from .frames import quat_of_approach, random_quats
 from .scene import Scene
 from .settings import Settings
 
@@ -33,13 +34,11 @@ def _axis(lo: float, hi: float, n: int) -> np.ndarray:
 @lru_cache(maxsize=64)
 def _orientations(n: int, orientation: str, seed: int) -> np.ndarray:
     """The start orientations depend on the grid size and seed only: drawn once per
-    process (read-only), as scipy's Rotation.random costs about 0.1 ms a call."""
+    process (read-only)."""
     if orientation == "forward":
-        q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+        q = np.tile(np.array(quat_of_approach((1.0, 0.0, 0.0))), (n, 1))
     else:
-        from scipy.spatial.transform import Rotation  # on first use (frames.py says why)
-
-        q = quat_from_matrix(Rotation.random(n, rng=np.random.default_rng(seed)).as_matrix())
+        q = random_quats(n, np.random.default_rng(seed))
     q.flags.writeable = False
     return q
 
@@ -74,11 +73,9 @@ def _search_draws(n: int, orientation: str, seed: int) -> tuple[np.ndarray, ...]
     rng = np.random.default_rng(seed)
     uy, uz = rng.random(n), rng.random(n)
     if orientation == "forward":
-        q = np.tile(quat_from_matrix(frame_from_approach((1.0, 0.0, 0.0))), (n, 1))
+        q = np.tile(np.array(quat_of_approach((1.0, 0.0, 0.0))), (n, 1))
     else:
-        from scipy.spatial.transform import Rotation  # on first use (frames.py says why)
-
-        q = quat_from_matrix(Rotation.random(n, rng=rng).as_matrix())
+        q = random_quats(n, rng)
     for a in (uy, uz, q):
         a.flags.writeable = False
     return uy, uz, q

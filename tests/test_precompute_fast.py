@@ -26,7 +26,9 @@ from geometry_precompute.clutteredness import clutteredness, overlap_volumes
 from geometry_precompute.frames import (
     frame_from_approach,
     quat_from_matrix,
+    quat_of_approach,
     quat_of_rotation,
+    random_quats,
 )
 from geometry_precompute.meshes import shape_manifold
 from geometry_precompute.overlap import disk_rect_area, fast_volumes, lens_area, pair_kind
@@ -209,6 +211,22 @@ def test_frames_equal_to_numpy_and_scipy():
                            [np.eye(3), frame_from_approach((0.0, 0.0, -1.0))]])
     for m in mats:
         assert quat_of_rotation(m) == tuple(quat_from_matrix(m))
+
+
+@given(st.integers(1, 300), st.integers(0, 2**63 - 1), st.integers(0, 5))
+def test_random_quats_are_scipys_random_rotations(n, seed, before):
+    """The start orientations without scipy: the same quaternions as scipy's
+    Rotation.random through quat_from_matrix, bit for bit, and the generator left where
+    scipy leaves it (the search's starts draw from it before and after)."""
+    ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+    assert np.array_equal(ours.random(before), theirs.random(before))
+    got = random_quats(n, ours)
+    want = quat_from_matrix(Rotation.random(n, rng=theirs).as_matrix())
+    assert got.shape == (n, 4) and got.dtype == np.float64
+    assert np.array_equal(got, want)
+    assert ours.random() == theirs.random()
+    assert quat_of_approach((1.0, 0.0, 0.0)) == tuple(quat_from_matrix(
+        frame_from_approach((1.0, 0.0, 0.0))))
 
 
 @given(st.integers(1, 14), st.lists(st.tuples(st.integers(0, 13), st.integers(0, 13)),
