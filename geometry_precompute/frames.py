@@ -47,7 +47,9 @@ def random_quats(n: int, rng: np.random.Generator) -> np.ndarray:
     numbers from ``rng``: scipy's method written out (four normal draws a rotation as
     x, y, z, w, normalised, then its matrix), each converted by
     :func:`quat_of_rotation`. Without scipy: importing scipy.spatial was a tenth of a
-    warm ``shacc evaluate`` (tests/test_precompute_fast.py holds the bits)."""
+    warm ``shacc evaluate`` (tests/test_precompute_fast.py holds the bits). Each NumPy
+    operation is one rounded IEEE operation (none is fused with the next), so the
+    result is the same on every processor."""
     s = rng.normal(size=(n, 4))
     x, y, z, w = s[:, 0], s[:, 1], s[:, 2], s[:, 3]
     norm = np.sqrt(x * x + y * y + z * z + w * w)

@@ -216,8 +216,9 @@ def test_frames_equal_to_numpy_and_scipy():
 @given(st.integers(1, 300), st.integers(0, 2**63 - 1), st.integers(0, 5))
 def test_random_quats_are_scipys_random_rotations(n, seed, before):
     """The start orientations without scipy: the same quaternions as scipy's
-    Rotation.random through quat_from_matrix, bit for bit, and the generator left where
-    scipy leaves it (the search's starts draw from it before and after)."""
+    Rotation.random through quat_from_matrix, bit for bit, from a generator already
+    drawn from (the search's starts draw their positions first), and the generator left
+    where scipy leaves it."""
     ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
     assert np.array_equal(ours.random(before), theirs.random(before))
     got = random_quats(n, ours)
