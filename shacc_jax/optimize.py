@@ -356,7 +356,7 @@ def search_sizes(baked) -> tuple[int, int, int]:
     return sizes[0], sizes[1], sizes[2]
 
 
-def search(baked, scenes_per_call: int | None = None) -> Search:
+def search(baked, scenes_per_call: int | None = None, calls: int = 1) -> Search:
     """Run the search for every scene of a bake; NumPy results.
 
     Scenes are searched in groups of equal task count, each cut to its own tasks, so a
@@ -365,13 +365,17 @@ def search(baked, scenes_per_call: int | None = None) -> Search:
     padded tasks. ``scenes_per_call`` bounds the scenes of one call of the compiled
     program (its memory grows with scenes x population x search starts x tasks); the
     calls of a group have one size (the last padded by repeating a scene), so each
-    group compiles once."""
+    group compiles once. ``calls``: how many batches of this shape the caller searches
+    (a sweep's chunks), for the program's compiler options
+    (``program_cache.quick``)."""
     population, generations, candidates = search_sizes(baked)
     with jax.enable_x64(True):
-        return _search_groups(baked, scenes_per_call, population, generations, candidates)
+        return _search_groups(baked, scenes_per_call, population, generations, candidates,
+                              calls)
 
 
-def _search_groups(baked, scenes_per_call, population, generations, candidates) -> Search:
+def _search_groups(baked, scenes_per_call, population, generations, candidates,
+                   calls) -> Search:
     geometry = jax.tree.map(np.asarray, Geometry.from_bake(baked, np.float64))
     params = jax.tree.map(np.asarray, Params.from_bake(baked, np.float64))
     problem = jax.tree.map(np.asarray, SearchProblem.from_bake(baked, np.float64))
@@ -398,7 +402,7 @@ def _search_groups(baked, scenes_per_call, population, generations, candidates) 
             idx = members[np.minimum(np.arange(a, a + per), len(members) - 1)]
             # Its activation rollouts: each generation's population from the search starts,
             # then the candidates, Shrinking's and the initial sizes from the validation's.
-            work = len(idx) * n * (population * generations * problem.opt_starts.shape[1]
+            work = calls * len(idx) * n * (population * generations * problem.opt_starts.shape[1]
                                    + (candidates + 2) * n_val)
             pieces.append((int(n), idx, members[a:a + per], work))
 

@@ -99,7 +99,9 @@ class RunPlan:
     ``scenes_per_part`` scenes each, the scenes padded by repeating the last one to
     ``padded_scenes``. ``fields``: the Rollouts fields copied to the host (the others stay
     None). ``metrics``: whether :func:`execute` computes the per-scene metrics.
-    ``bytes_per_piece`` of the ``budget`` (bytes), the estimate that chose the pieces."""
+    ``bytes_per_piece`` of the ``budget`` (bytes), the estimate that chose the pieces.
+    ``calls``: how many times the caller runs this plan (a sweep's chunks); with the
+    pieces, the calls of one program, whose work together decides its compiler options."""
 
     layout: Layout
     n_scenes: int
@@ -114,6 +116,7 @@ class RunPlan:
     metrics: bool
     bytes_per_piece: int
     budget: int
+    calls: int = 1
 
     def describe(self) -> str:
         """The plan as a few lines for people (``shacc evaluate --plan``).
@@ -231,7 +234,7 @@ def _stacked_params(points: Sequence) -> Params:
 def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
          fields: Sequence[str] | None = None, metrics: bool = True,
          budget_bytes: int | None = None, devices: Sequence | None = None,
-         backend: str | None = None) -> RunPlan:
+         backend: str | None = None, calls: int = 1) -> RunPlan:
     """The :class:`RunPlan` of evaluating ``baked`` in ``modes`` (of
     ``shacc_jax.MODES``), decided in NumPy. A pure function of its arguments; the
     defaults read the machine (``budget()``, ``jax.local_devices()``,
@@ -247,6 +250,9 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         CPU the first device, or every one for stepped users).
     :param backend: the backend whose block size and memory model apply (default the
         one in use).
+    :param calls: how many times the caller will run this plan (a sweep runs one
+        program for each of its chunks): a small CPU program is compiled quickly
+        (``program_cache.quick``) only where the work of all its calls is small.
     :raises InputError: when two start poses of the batch do not fit the budget.
 
     Example::
@@ -306,7 +312,8 @@ def plan(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
                    pieces=tuple(range(0, N, n_per)), starts_per_piece=n_per,
                    devices=tuple(str(d) for d in devices), scenes_per_part=per_part,
                    padded_scenes=per_part * len(devices), fields=_fields(fields),
-                   metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit)
+                   metrics=metrics, bytes_per_piece=per_start * n_per, budget=limit,
+                   calls=calls)
 
 
 def _how(lay: Layout) -> str:
@@ -332,12 +339,14 @@ _EVALUATION_STRUCTURE = Evaluation(Rollouts._make([0] * len(Rollouts._fields)),
 
 
 def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
-               fields: tuple[str, ...]) -> Rollouts:
+               fields: tuple[str, ...], calls: int) -> Rollouts:
     """One part on one device, through the program cache; the fields copied back
-    (every copy started before the first is waited for)."""
+    (every copy started before the first is waited for). ``calls``: of this program,
+    which with its work decide its compiler options."""
     geometry, params = jax.device_put((geometry, params), device)
     ev = program_cache.call("evaluate", evaluate, {"layout": layout}, (geometry, params),
-                            _EVALUATION_STRUCTURE, work=program_work(geometry, params, layout))
+                            _EVALUATION_STRUCTURE,
+                            work=calls * program_work(geometry, params, layout))
     return _copied_back({k: getattr(ev.rollouts, k) for k in fields})
 
 
@@ -393,10 +402,10 @@ def _evaluate_parts(geometry: Geometry, params: Params, layout: Layout,
 
 
 def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: Layout,
-                    fields: tuple[str, ...], lead: int) -> Rollouts:
+                    fields: tuple[str, ...], lead: int, calls: int) -> Rollouts:
     """Every part on its CPU device, as one program (compiled once, not once per
     device: XLA's CPU client runs each device's part on its own thread); the fields
-    copied back."""
+    copied back. ``calls`` as for :func:`_on_device`."""
     mesh = Mesh(np.array(devices), ("scenes",))
     geometry = jax.device_put(geometry, NamedSharding(mesh, PartitionSpec("scenes")))
     params = jax.device_put(params, NamedSharding(
@@ -404,7 +413,7 @@ def _on_cpu_devices(devices: list, geometry: Geometry, params: Params, layout: L
     out = program_cache.call("evaluate-parts", _evaluate_parts,
                              {"layout": layout, "fields": fields, "mesh": mesh, "lead": lead},
                              (geometry, params), tuple(fields),
-                             work=program_work(geometry, params, layout))
+                             work=calls * program_work(geometry, params, layout))
     return _copied_back(dict(zip(fields, out, strict=True)))
 
 
@@ -450,18 +459,21 @@ def execute(p: RunPlan, baked, points: Sequence | None = None) -> Evaluation:
         return Rollouts._make(one(*xs) for xs in zip(*outs, strict=True))
 
     pieces = []
+    calls = p.calls * len(p.pieces)  # of each device's program
     with ThreadPoolExecutor(len(devices)) as pool:
         for first in p.pieces:
             idx = np.minimum(np.arange(first, first + n), N - 1)  # the last piece padded
             piece = geometry if n == N else geometry._replace(
                 starts=geometry.starts[:, idx], start_index=geometry.start_index[:, idx])
             if len(devices) == 1:
-                outs = [_on_device(devices[0], *part(0, piece), p.layout, p.fields)]
+                outs = [_on_device(devices[0], *part(0, piece), p.layout, p.fields, calls)]
             elif on_cpu:
-                outs = [_on_cpu_devices(devices, piece, params, p.layout, p.fields, lead)]
+                outs = [_on_cpu_devices(devices, piece, params, p.layout, p.fields, lead,
+                                        calls)]
             else:
                 outs = list(pool.map(lambda k, piece=piece: _on_device(
-                    devices[k], *part(k, piece), p.layout, p.fields), range(len(devices))))
+                    devices[k], *part(k, piece), p.layout, p.fields, calls),
+                    range(len(devices))))
             pieces.append(join([join(outs, lead, S)], lead + 2, min(n, N - first)))
     rollouts = join(pieces, lead + 2, N)
     dt = np.asarray(baked.dt if points is None else [b.dt for b in points])
@@ -490,7 +502,8 @@ def search_scenes_per_call(baked, budget_bytes: int | None = None) -> int:
 
 def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
         fields: Sequence[str] | None = None, metrics: bool = True, found: Any = None,
-        budget_bytes: int | None = None, devices: Sequence | None = None) -> Run:
+        budget_bytes: int | None = None, devices: Sequence | None = None,
+        calls: int = 1) -> Run:
     """Evaluate a bake in ``modes`` (any of ``shacc_jax.ALL_MODES``, in the order of the
     result's mode axis): :func:`plan`, then :func:`execute`. The ``optimized`` mode
     runs its search first (``shacc_jax.optimize``), then shacc's rules on the spaces it
@@ -503,6 +516,8 @@ def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
     :param metrics: compute the per-scene metrics (else None).
     :param found: a search already run for these scenes (its parameters are used).
     :param budget_bytes: the memory budget, ``devices`` the devices (:func:`plan`).
+    :param calls: how many batches of this shape the caller evaluates (a sweep's
+        chunks), for the programs' compiler options (:func:`plan`).
     :returns: a :class:`Run`: the Evaluation as NumPy arrays, (S, M, N, T) rollouts and
         (S, M) metrics, or (P, S, M, ...) with points; and the search.
 
@@ -521,7 +536,8 @@ def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
             if not np.array_equal(getattr(b, name), getattr(baked, name)):
                 raise ValueError(f"run: the points differ from the bake in {name}")
     options: dict[str, Any] = {"fields": fields, "metrics": metrics,
-                               "budget_bytes": budget_bytes, "devices": devices}
+                               "budget_bytes": budget_bytes, "devices": devices,
+                               "calls": calls}
     if points is not None and (OPTIMIZED in modes or len(points) == 1):
         # Each point on its own (the search depends on the rollout settings; one point
         # needs no points axis), stacked.
@@ -544,7 +560,7 @@ def run(baked, modes: Sequence[str] = MODES, *, points: Sequence | None = None,
             except ValueError as e:
                 raise InputError("<batch>", "optimize_population/optimize_generations",
                                  str(e)) from None
-            found = search(baked, search_scenes_per_call(baked, budget_bytes))
+            found = search(baked, search_scenes_per_call(baked, budget_bytes), calls)
         center, dims = optimized_spaces(baked, found)
         best = replace(baked, center_opt=center, dims_opt=dims)
         again = _optimized_modes(baked, plain)

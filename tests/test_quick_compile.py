@@ -85,3 +85,47 @@ def test_a_programs_work_weighs_each_modes_rollouts_by_their_cost():
                  for p in shipped_scene_paths()[:2]])
     g, p, layout = inputs(user, ("baseline",))
     assert layout.stepped_users and program_work(g, p, layout) == S * N * T * RUN_COST["stepped"]
+
+
+def test_a_program_run_many_times_counts_the_work_of_every_call(monkeypatch, tmp_path):
+    """The compiler options of a program weigh its work by its calls: every piece of a
+    batch split by the memory budget, and every batch of that shape the caller said it
+    will run (``calls``: a sweep's chunks, all padded to one shape). A sweep of many
+    small chunks is then compiled at XLA's default level, as one batch of all of them
+    would be."""
+    from test_sweep import CONFIG, write
+
+    import shacc_jax
+    from sweeps.config import load_config
+    from sweeps.distributed.plan import plan
+    from sweeps.distributed.runner import program_calls, warm_up_job
+
+    seen: list[tuple[int, bool]] = []
+    decide = program_cache.quick
+
+    def recording(work, leaves):
+        seen.append((work, decide(work, leaves)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(program_cache, "quick", recording)
+    b = bake([precompute(load_scene(shipped_scene_paths()[0]), {"start_grid": [2, 2]})])
+    g, p, layout = inputs(b, ("baseline",))
+    once = program_work(g, p, layout)
+    assert once < program_cache.QUICK_COMPILE_ROLLOUTS
+    calls = program_cache.QUICK_COMPILE_ROLLOUTS // once + 1
+    single = shacc_jax.run(b, ("baseline",), calls=1)
+    many = shacc_jax.run(b, ("baseline",), calls=calls)
+    assert seen == [(once, True), (calls * once, False)]
+    np.testing.assert_array_equal(single.evaluation.rollouts.outcome,
+                                  many.evaluation.rollouts.outcome)
+    # The grid's four starts in two pieces of two: one program of half the work, run
+    # twice.
+    seen.clear()
+    half = shacc_jax.plan(b, ("baseline",)).bytes_per_piece // 2
+    shacc_jax.run(b, ("baseline",), budget_bytes=half)
+    assert [w for w, _ in seen] == [2 * (once // 2)] * 2
+
+    cfg = load_config(write(tmp_path, CONFIG))  # 3 scenes, a chunk each, one points group
+    chunks = plan(cfg)
+    assert program_calls(cfg) == {len(chunks[0].points): len(chunks)}
+    assert warm_up_job(cfg, chunks[2:], None)[0].calls == len(chunks)  # resumed: the same

@@ -48,6 +48,7 @@ class ChunkJob:
     setting_names: tuple[str, ...]  # the scenes table's set.* columns
     populations: tuple[str, ...] = ()  # settings some point gives a population: their
     #                                    set.* columns are text, the rollouts carry draws
+    calls: int = 1                 # the sweep's chunks that run this chunk's program
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,8 @@ def _warm_up(job: ChunkJob, ref) -> dict:
         batch = bake_batch([(precompute(scene, settings(scene, 0)), False)], list(job.points),
                            job.shapes.tasks, job.shapes.objects, 0.0, settings)
     WARM_UP_MARKS["baked"] = time.time()
-    _evaluate([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes], job.modes)
+    _evaluate([concatenate([b], pad_to=job.shapes.scenes) for b in batch.bakes], job.modes,
+              calls=job.calls)
     WARM_UP_MARKS["ended"] = time.time()
     loaded = _COUNTS["loaded"] - before["loaded"]
     return {"seconds": time.perf_counter() - t0, "loaded": loaded,
@@ -267,21 +269,23 @@ def join_chunk(job: ChunkJob, *batches) -> JoinedChunk:
                         "join": time.perf_counter() - t0})
 
 
-def _evaluate(bakes: list, modes, populations: bool = False) -> list[tuple]:
+def _evaluate(bakes: list, modes, populations: bool = False, calls: int = 1) -> list[tuple]:
     """Per point of a chunk: (its Evaluation, its search or None), from one
     ``shacc_jax.run`` with a points axis. Only the COMPACT fields come back, and no
     per-scene metrics: encode_chunk computes them on a CPU worker, off this worker's
-    path (8 ms a 1 000-scene chunk)."""
+    path (8 ms a 1 000-scene chunk). ``calls``: the sweep's chunks that run the same
+    program, for its compiler options."""
     import jax  # deferred: 1.8 s to import
 
     import shacc_jax  # deferred: 1.8 s to import
 
     fields = tuple(COMPACT) + (("user",) if populations else ())
     if len(bakes) == 1:  # no points axis to add and take off again
-        one = shacc_jax.run(bakes[0], modes, fields=fields, metrics=False)
+        one = shacc_jax.run(bakes[0], modes, fields=fields, metrics=False, calls=calls)
         assert not isinstance(one.search, list)
         return [(one.evaluation, one.search)]
-    out = shacc_jax.run(bakes[0], modes, points=bakes, fields=fields, metrics=False)
+    out = shacc_jax.run(bakes[0], modes, points=bakes, fields=fields, metrics=False,
+                        calls=calls)
     searches = out.search if isinstance(out.search, list) else [None] * len(bakes)
     return [(jax.tree.map(lambda a, i=i: a[i], out.evaluation), found)
             for i, found in enumerate(searches)]
@@ -304,7 +308,7 @@ def evaluate_chunk(job: ChunkJob, joined: JoinedChunk) -> ChunkArrays:
     _setup()
     before = dict(_COUNTS)
     t1 = time.perf_counter()
-    evs = _evaluate(joined.bakes, job.modes, bool(job.populations))
+    evs = _evaluate(joined.bakes, job.modes, bool(job.populations), job.calls)
     S = len(job.chunk.scenes)
     # Plain dicts of NumPy arrays: no JAX type travels to the CPU workers.
     rollouts = [{k: getattr(ev.rollouts, k)[:S].astype(t) for k, t in COMPACT.items()}

@@ -310,8 +310,20 @@ def warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
 
     c = todo[0]
     job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shapes(cfg),
-                   _setting_names(cfg), _populations(cfg))
+                   _setting_names(cfg), _populations(cfg), program_calls(cfg)[len(c.points)])
     return job, files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
+
+
+def program_calls(cfg: SweepConfig) -> dict[int, int]:
+    """Chunks of the whole sweep per number of points in a chunk: the calls of one
+    evaluation program, since every chunk is padded to the sweep's shapes. Their work
+    together decides the program's compiler options (a sweep of many small chunks is
+    not compiled as one small batch would be), from the config alone, so a resumed run
+    builds or loads the same programs."""
+    calls: dict[int, int] = {}
+    for c in plan(cfg):
+        calls[len(c.points)] = calls.get(len(c.points), 0) + 1
+    return calls
 
 
 def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
@@ -335,6 +347,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     run = uuid.uuid4().hex[:8]  # task keys of this run, apart from any earlier run's
     shp = shapes(cfg)
     names = _setting_names(cfg)
+    calls = program_calls(cfg)
     cache_arg = None if cache is None else str(cache)
     per_scene = _rollouts_per_scene(cfg, files)
     # In flight (submitted, not yet written): four chunks per evaluation worker, and the
@@ -372,7 +385,8 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             batch_size[f.key] = len(part)
             batches.append(f)
             done.add(f)
-        job = ChunkJob(c, tuple(points), cfg.modes, shp, names, _populations(cfg))
+        job = ChunkJob(c, tuple(points), cfg.modes, shp, names, _populations(cfg),
+                       calls[len(c.points)])
         # Joined on a CPU worker: the evaluation worker then only evaluates.
         joined = client.submit(join_chunk, job, *batches, key=f"join-{run}-{c.index}",
                                priority=-c.index, resources=pool.precompute, pure=False)
