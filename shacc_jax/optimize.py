@@ -338,6 +338,12 @@ def _search(geometry: Geometry, params: Params, problem: SearchProblem, populati
 _SEARCH_STRUCTURE = Search._make([0] * len(Search._fields))
 
 
+# A search's activation rollouts per closed-form rollout of work (program_cache.quick):
+# at level 0 on the 2-core CPU one costs about a third of a closed-form rollout
+# (benchmarks/bench_levels.py; break-even 181 000-446 000 activation rollouts against
+# 66 000 closed-form ones), so a search is compiled quickly up to 98 304 of them.
+ACTIVATIONS_PER_ROLLOUT = 3
+
 SIZES = ("optimize_population", "optimize_generations", "optimize_candidates")
 
 
@@ -393,17 +399,21 @@ def _search_groups(baked, scenes_per_call, population, generations, candidates,
                  validation=np.zeros(S, dtype), validation_init=np.zeros(S, dtype),
                  validation_shrunk=np.zeros(S, dtype), winner=np.zeros(S, np.int32),
                  clutteredness=np.zeros(S, dtype))
-    pieces = []  # (task count, scenes of the call, scenes kept, the call's work)
+    pieces = []  # (task count, scenes of the call, scenes kept, the program's work)
     for n in np.unique(n_tasks):
         members = np.flatnonzero(n_tasks == n)
         per = len(members) if scenes_per_call is None else max(1, min(len(members),
                                                                       int(scenes_per_call)))
-        for a in range(0, len(members), per):
+        firsts_of_group = range(0, len(members), per)
+        # The program's work: its activation rollouts (each generation's population from
+        # the search starts, then the candidates, Shrinking's and the initial sizes from
+        # the validation's) in every call of it, the group's and the caller's, in
+        # closed-form rollouts.
+        activations = calls * len(firsts_of_group) * per * int(n) * (
+            population * generations * problem.opt_starts.shape[1] + (candidates + 2) * n_val)
+        work = -(-activations // ACTIVATIONS_PER_ROLLOUT)
+        for a in firsts_of_group:
             idx = members[np.minimum(np.arange(a, a + per), len(members) - 1)]
-            # Its activation rollouts: each generation's population from the search starts,
-            # then the candidates, Shrinking's and the initial sizes from the validation's.
-            work = calls * len(idx) * n * (population * generations * problem.opt_starts.shape[1]
-                                   + (candidates + 2) * n_val)
             pieces.append((int(n), idx, members[a:a + per], work))
 
     def arrays(n, idx):
