@@ -5,13 +5,14 @@ level 0 (``program_cache.QUICK_OPTIONS``) and at XLA's default, and run twice ea
 
 Cases: the paper's three modes in closed form on the shipped scenes (four copies, 6 x 6
 starts) and on 40 random 10-task scenes; a noisy user (stepped) on the shipped scenes
-(two copies); the optimized mode's search on two random 10-task scenes with a small
-search (population 8, 3 generations, 16 search starts) and with the default sizes, and
-on six 4-task scenes with the small search. Prints one JSON line per case and level: its
-work (closed-form rollouts, or the search's activation rollouts), the seconds of trace
-and lowering, of the compile, and of each run. The break-even work of a case is where
-the compile time saved at level 0 equals the run time lost, which is what
-``program_cache.QUICK_COMPILE_ROLLOUTS`` and ``runplan.RUN_COST`` stand for. Asserts
+(two copies); the intent modes with baseline and shacc on the shipped scenes (one copy)
+and on 4 random 10-task scenes; the optimized mode's search on two random 10-task
+scenes with a small search (population 8, 3 generations, 16 search starts) and with the
+default sizes, and on six 4-task scenes with the small search. Prints one JSON line per
+case and level: its work (closed-form rollouts, or the search's activation rollouts), the
+seconds of trace and lowering, of the compile, and of each run. The break-even work of a
+case is where the compile time saved at level 0 equals the run time lost, which is what
+``program_cache.QUICK_COMPILE_ROLLOUTS`` and ``runplan.LEVEL_COST`` stand for. Asserts
 nothing; the caches are off.
 """
 
@@ -82,6 +83,10 @@ def _case(name):
         return _evaluation(randoms(40, 10), paper)
     if name == "noisy-shipped":
         return _evaluation(shipped_at(2, user_noise=0.2, user_tremor=0.01), paper)
+    if name == "intent-shipped":  # reproduce's intent section's modes
+        return _evaluation(shipped_at(1), ("baseline", "shacc", "blend", "ho", "shacc_ho"))
+    if name == "intent-random":
+        return _evaluation(randoms(4, 10), ("baseline", "shacc", "blend", "ho", "shacc_ho"))
     if name == "search-small-10":
         return _search(randoms(2, 10, SMALL_SEARCH), 10)
     if name == "search-default-10":
@@ -91,8 +96,8 @@ def _case(name):
     raise ValueError(name)
 
 
-CASES = ("closed-shipped", "closed-random", "noisy-shipped", "search-small-10",
-         "search-small-4", "search-default-10")
+CASES = ("closed-shipped", "closed-random", "noisy-shipped", "intent-shipped", "intent-random",
+         "search-small-10", "search-small-4", "search-default-10")
 
 
 def main() -> None:

@@ -55,7 +55,7 @@ _QUICK: dict[str, Callable] = {}  # name -> the jitted function compiled with QU
 _QUICK_LOCK = threading.Lock()  # ahead()'s threads may ask for the same name at once
 
 # A CPU program whose work is at most this many closed-form rollouts (a stepped or an
-# intent mode's rollout counts as several: shacc_jax.runplan.RUN_COST) is compiled with
+# intent mode's rollout counts as several: shacc_jax.runplan.LEVEL_COST) is compiled with
 # LLVM's passes off (QUICK_OPTIONS). On the 2-core CPU a program then compiles 3-35 s
 # faster and runs about 10x slower (74 us more a closed-form rollout), so below this
 # size the compile time saved outweighs the run time lost (docs/DECISIONS.md,

@@ -353,27 +353,37 @@ def _on_device(device, geometry: Geometry, params: Params, layout: Layout,
 # A rollout's run time against a perfect user's closed-form one, on the 2-core CPU at
 # XLA's default level (benchmarks/RESULTS.md, 100 random 10-task scenes): 8.3 us
 # closed form; 20 us with collision checks; 46 us stepped with every user setting; 536
-# us in the intent modes. What decides a program's compiler options
-# (program_cache.quick) is its rollouts weighted by these.
+# us in the intent modes. What decides whether the optimized mode reuses its batch's
+# program (OPTIMIZED_REUSE_WORK) is the rollouts weighted by these.
 RUN_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 64}
+
+# What a rollout weighs in the choice of a CPU program's compiler options
+# (program_cache.quick): the run time that level 0 adds to it against the compile time
+# level 0 saves, relative to the closed form's (benchmarks/bench_levels.py). The run
+# time's ratios, but for the intent modes: their programs are the largest, so level 0
+# saves the most compile time on them (10 s on four random 10-task scenes, 2 s on the
+# closed form), and their break-even lies at about 330 000 rollouts weighted by 64
+# where the closed form's lies at 66 000.
+LEVEL_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 16}
 
 
 def program_work(geometry: Geometry, params: Params, layout: Layout) -> int:
     """The work of one evaluation program, in closed-form rollouts: points x scenes x
-    starts x tasks (padding included) per mode, each weighted by its :data:`RUN_COST`
-    (intent modes, stepped users, collision checks)."""
+    starts x tasks (padding included) per mode, each weighted by its :data:`LEVEL_COST`
+    (intent modes, stepped users, collision checks): what decides its compiler options."""
     S, N = geometry.starts.shape[:2]
     points = params[0].shape[0] if params[0].ndim > 1 else 1
-    return layout_work(layout, points * S * N * geometry.task_mask.shape[1])
+    return layout_work(layout, points * S * N * geometry.task_mask.shape[1], LEVEL_COST)
 
 
-def layout_work(layout: Layout, per_mode: int) -> int:
-    """:func:`program_work` of a program of ``layout`` with ``per_mode`` rollouts (points
-    x scenes x starts x tasks) in each of its modes."""
-    base = RUN_COST["stepped"] if layout.stepped_users else RUN_COST["closed"]
+def layout_work(layout: Layout, per_mode: int, cost: dict[str, int] = RUN_COST) -> int:
+    """The rollouts of a program of ``layout`` with ``per_mode`` rollouts (points x scenes
+    x starts x tasks) in each of its modes, each weighted by its ``cost`` (default
+    :data:`RUN_COST`, run time)."""
+    base = cost["stepped"] if layout.stepped_users else cost["closed"]
     if layout.collision_checks:
-        base *= RUN_COST["collision"]
-    return sum(per_mode * (RUN_COST["intent"] if m in INTENT_MODES else base)
+        base *= cost["collision"]
+    return sum(per_mode * (cost["intent"] if m in INTENT_MODES else base)
                for m in layout.modes)
 
 

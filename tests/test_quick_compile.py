@@ -19,7 +19,7 @@ from geometry_precompute import (
     shipped_scene_paths,
 )
 from shacc_jax import evaluation, program_cache
-from shacc_jax.runplan import RUN_COST, program_work
+from shacc_jax.runplan import LEVEL_COST, program_work
 from shacc_jax.types import inputs
 
 LEVEL = "xla_backend_optimization_level"
@@ -80,11 +80,11 @@ def test_a_programs_work_weighs_each_modes_rollouts_by_their_cost():
     points = type(p)._make(np.stack([a, a, a]) for a in p)
     assert program_work(g, points, layout) == 3 * S * N * T * 2
     g, p, layout = inputs(b, ("baseline", "blend"))
-    assert program_work(g, p, layout) == S * N * T * (1 + RUN_COST["intent"])
+    assert program_work(g, p, layout) == S * N * T * (1 + LEVEL_COST["intent"])
     user = bake([precompute(load_scene(p), {"start_grid": [4, 3], "user_tremor": 0.01})
                  for p in shipped_scene_paths()[:2]])
     g, p, layout = inputs(user, ("baseline",))
-    assert layout.stepped_users and program_work(g, p, layout) == S * N * T * RUN_COST["stepped"]
+    assert layout.stepped_users and program_work(g, p, layout) == S * N * T * LEVEL_COST["stepped"]
 
 
 def test_a_program_run_many_times_counts_the_work_of_every_call(monkeypatch, tmp_path):
