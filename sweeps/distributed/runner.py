@@ -28,6 +28,7 @@ import os
 import sys
 import time
 import uuid
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -320,10 +321,7 @@ def program_calls(cfg: SweepConfig) -> dict[int, int]:
     together decides the program's compiler options (a sweep of many small chunks is
     not compiled as one small batch would be), from the config alone, so a resumed run
     builds or loads the same programs."""
-    calls: dict[int, int] = {}
-    for c in plan(cfg):
-        calls[len(c.points)] = calls.get(len(c.points), 0) + 1
-    return calls
+    return dict(Counter(len(c.points) for c in plan(cfg)))
 
 
 def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: Path | None,
