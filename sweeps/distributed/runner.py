@@ -29,6 +29,7 @@ import sys
 import time
 import uuid
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -304,15 +305,28 @@ def _run_locked(cfg: SweepConfig, out: Path, cache: Path | None, workers: int | 
     return summary
 
 
+def job_maker(cfg: SweepConfig) -> Callable[[Chunk], Any]:
+    """The ``evaluation_worker.ChunkJob`` of each chunk of the sweep: what decides its
+    evaluation program (the sweep's shapes, modes, settings and populations, and the
+    calls of that program), worked out once. The warm-up and every chunk take their jobs
+    from here, so the program warmed up is the one the chunks run."""
+    from sweeps.distributed.evaluation_worker import ChunkJob  # deferred: 15 ms to import
+
+    shp, names, populations = shapes(cfg), _setting_names(cfg), _populations(cfg)
+    calls = program_calls(cfg)
+
+    def job(c: Chunk):
+        return ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shp, names,
+                        populations, calls[len(c.points)])
+    return job
+
+
 def warm_up_job(cfg: SweepConfig, todo: list[Chunk], files) -> tuple:
     """(job, scene) of ``evaluation_worker.warm_up``: the first chunk's job and its first
     scene (a Scene, or ``random_scene``'s arguments)."""
-    from sweeps.distributed.evaluation_worker import ChunkJob  # deferred: 15 ms to import
-
     c = todo[0]
-    job = ChunkJob(c, tuple(cfg.points[i] for i in c.points), cfg.modes, shapes(cfg),
-                   _setting_names(cfg), _populations(cfg), program_calls(cfg)[len(c.points)])
-    return job, files[c.scenes[0]] if files is not None else cfg.random_ref(c.scenes[0])
+    return job_maker(cfg)(c), files[c.scenes[0]] if files is not None else \
+        cfg.random_ref(c.scenes[0])
 
 
 def program_calls(cfg: SweepConfig) -> dict[int, int]:
@@ -335,7 +349,6 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
 
     # deferred: importing it takes 15 ms
     from sweeps.distributed.evaluation_worker import (
-        ChunkJob,
         encode_chunk,
         evaluate_chunk,
         join_chunk,
@@ -344,8 +357,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
     client = pool.client
     run = uuid.uuid4().hex[:8]  # task keys of this run, apart from any earlier run's
     shp = shapes(cfg)
-    names = _setting_names(cfg)
-    calls = program_calls(cfg)
+    chunk_job = job_maker(cfg)
     cache_arg = None if cache is None else str(cache)
     per_scene = _rollouts_per_scene(cfg, files)
     # In flight (submitted, not yet written): four chunks per evaluation worker, and the
@@ -383,8 +395,7 @@ def _stream(cfg: SweepConfig, out: Path, todo: list[Chunk], files, pool, cache: 
             batch_size[f.key] = len(part)
             batches.append(f)
             done.add(f)
-        job = ChunkJob(c, tuple(points), cfg.modes, shp, names, _populations(cfg),
-                       calls[len(c.points)])
+        job = chunk_job(c)
         # Joined on a CPU worker: the evaluation worker then only evaluates.
         joined = client.submit(join_chunk, job, *batches, key=f"join-{run}-{c.index}",
                                priority=-c.index, resources=pool.precompute, pure=False)
