@@ -75,21 +75,28 @@ def local_sdf_project(kind, dims, x, y, z):
 
 
 class Space:
+    """A task space at its pose; points in and out as NumPy arrays, the maths on Python
+    floats (the comment above: R^T (p - c) into the local frame, R q + c back)."""
+
     def __init__(self, kind, center, quat, dims):
         self.kind = int(kind)
-        self.center = np.asarray(center, float)
-        self.rot = _rot(quat).as_matrix()
+        self.center = tuple(float(v) for v in center)
+        self.rot = tuple(tuple(float(v) for v in row) for row in _rot(quat).as_matrix())
         self.dims = tuple(float(v) for v in dims)
 
     def _local(self, p):
-        return self.rot.T @ (np.asarray(p) - self.center)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = self.rot
+        dx, dy, dz = (float(p[i]) - self.center[i] for i in range(3))
+        return (r00 * dx + r10 * dy + r20 * dz, r01 * dx + r11 * dy + r21 * dz,
+                r02 * dx + r12 * dy + r22 * dz)
 
     def sdf(self, p):
         return local_sdf_project(self.kind, self.dims, *self._local(p))[0]
 
     def project(self, p):
-        q = local_sdf_project(self.kind, self.dims, *self._local(p))[1]
-        return self.rot @ np.array(q) + self.center
+        x, y, z = local_sdf_project(self.kind, self.dims, *self._local(p))[1]
+        return np.array([r0 * x + r1 * y + r2 * z + c
+                         for (r0, r1, r2), c in zip(self.rot, self.center, strict=True)])
 
 
 # --- orientation -----------------------------------------------------------------------
