@@ -86,7 +86,8 @@ class Space:
 
     def _local(self, p):
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = self.rot
-        dx, dy, dz = (float(p[i]) - self.center[i] for i in range(3))
+        (px, py, pz), (cx, cy, cz) = np.asarray(p, float).tolist(), self.center
+        dx, dy, dz = px - cx, py - cy, pz - cz
         return (r00 * dx + r10 * dy + r20 * dz, r01 * dx + r11 * dy + r21 * dz,
                 r02 * dx + r12 * dy + r22 * dz)
 
