@@ -11,6 +11,7 @@
 SCENE = None    # a scene file; None: the shipped scene 09_mug_behind_two
 GRID = 24       # starts per side of the start plane; 64 or 128 for publication figures
 OPTIMIZED = True  # also compare Shrinking with the optimized mode's sizes (a search)
+SEARCH = {}     # the search's settings, e.g. {"optimize_population": 16}; {}: the defaults
 FIGURES = None  # a folder to save the figures in (success_fields*.png); None: show only
 
 # %%
@@ -24,7 +25,7 @@ from sweeps.pipeline import evaluate_results, optimized_params
 
 path = SCENE or next(p for p in shipped_scene_paths() if "mug_behind_two" in p.name)
 scene = load_scene(path)
-r = precompute(scene, scene.settings(overrides={"start_grid": [GRID, GRID]}))
+r = precompute(scene, scene.settings(overrides={"start_grid": [GRID, GRID], **SEARCH}))
 ev = evaluate_results([r], ("baseline", "shrinking", "shacc"))
 T = len(r.spaces)
 outcome = ev.evaluation.rollouts.outcome[0, :, :, :T]
