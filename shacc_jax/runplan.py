@@ -364,7 +364,7 @@ RUN_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 64}
 # saves the most compile time on them (10 s on four random 10-task scenes, 2 s on the
 # closed form), and their break-even lies at about 330 000 rollouts weighted by 64
 # where the closed form's lies at 66 000.
-LEVEL_COST = {"closed": 1, "collision": 3, "stepped": 6, "intent": 16}
+LEVEL_COST = {**RUN_COST, "intent": 16}
 
 
 def program_work(geometry: Geometry, params: Params, layout: Layout) -> int:
