@@ -234,20 +234,26 @@ def rollout_numbers(params: Params, dtype) -> dict:
 def activation_pass(geometry: Geometry, params: Params, which: str):
     """Phase 1 for one scene: (path, activation, outcome), each (N, T, ...), on the
     ``init`` or ``opt`` spaces."""
-    return activation_pass_on(geometry, params, geometry.spaces(which))
+    return activation_pass_on(geometry.starts, geometry.task_mask, params,
+                              geometry.spaces(which))
 
 
-def activation_pass_on(geometry: Geometry, params: Params, spaces):
-    """:func:`activation_pass` on the prepared ``spaces`` (``Geometry.spaces``)."""
-    x = rollout_numbers(params, geometry.starts.dtype)
+def activation_pass_on(starts: Float[Array, "N 7"], task_mask: Bool[Array, " T"],
+                       params: Params, spaces):
+    """:func:`activation_pass` on one scene's ``starts`` and ``task_mask`` and the
+    prepared ``spaces`` (``Geometry.spaces``)."""
+    x = rollout_numbers(params, starts.dtype)
 
     def one(p0, target):
         path = straight_path(spaces, target, p0, x["step_length"], x["max_steps"])
-        act = first_activation(spaces, geometry.task_mask, path, x["tau"], x["max_steps"],
+        act = first_activation(spaces, task_mask, path, x["tau"], x["max_steps"],
                                x["grow"])
         out = classify(act, target, path, x["max_steps"], params.ambiguity_nearest)
         return path, act, out
 
-    T = geometry.task_mask.shape[0]
-    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(geometry.starts[:, :3],
+    # Two vmaps here, not one over the N x T lanes (``flatmap``): XLA then simplifies
+    # the program otherwise, and 15 recorded fields (points, path lengths, delta_R)
+    # changed in their last bits (an ulp, towards a single lane's own arithmetic).
+    T = task_mask.shape[0]
+    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(starts[:, :3],
                                                          jnp.arange(T, dtype=jnp.int32))

@@ -34,6 +34,7 @@ from . import collision as col
 from . import lanes as lane_scheduler
 from . import path_cull as cull
 from . import populations, stepping, tracking
+from .flatmap import spread, vmap_leading
 from .metrics import batch_metrics
 from .types import (
     COLLISION,
@@ -109,8 +110,7 @@ def _windows(geometry: Geometry, params: Params, path: am.Path, act_step: Array,
                 touch = jnp.zeros(g.obj_mask.shape, bool)
             return m_from, m_to, c_from, c_to, touch
 
-        over_tasks = jax.vmap(one, (None, 0, 0))
-        return jax.vmap(over_tasks, (0, 0, 0))(g.starts, path, k_act)
+        return vmap_leading(one, 2)(spread(g.starts, k_act.shape, (0,)), path, k_act)
 
     out = jax.vmap(per_scene)(geometry, params, path, act_step, init, bounds)
     m_from, m_to, c_from, c_to, touch = (a.reshape(S * N * T, *a.shape[3:]) for a in out)
@@ -236,7 +236,7 @@ def _collided(out: am.Outcome, path: am.Path, hit: Array) -> am.Outcome:
     sample ``hit`` (at or before the activation sample)."""
     found = jnp.isfinite(hit)
     k = jnp.where(found, hit, 0.0)
-    point = jax.vmap(jax.vmap(jax.vmap(am.sample)))(path, k)
+    point = vmap_leading(am.sample, 3)(path, k)
     return am.Outcome(
         jnp.where(found, COLLISION, out.code),
         jnp.where(found, -1, out.activated),
@@ -255,15 +255,14 @@ def _with_assist(out: am.Outcome, r, meta_steps, assist=None) -> tuple:
     return out, r, meta_steps, assist
 
 
-def _assemble(geometry: Geometry, drawn, out: am.Outcome, r, meta_steps, assist
-              ) -> Rollouts:
-    """One scene's rollouts of one mode (``drawn``: its users' drawn settings, (N, T,
-    U); the rest :func:`_with_assist`'s, (N, T, ...))."""
-    T = geometry.task_mask.shape[0]
-    orient = (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis)
-    dr = jax.vmap(jax.vmap(am.delta_r, (0, 0, None, 0)), (0, 0, None, None))(
-        out, r, orient, jnp.arange(T, dtype=jnp.int32))
-    code = jnp.where(geometry.task_mask[None, :], out.code, INVALID)
+def _assemble(task_mask, orient, drawn, out: am.Outcome, r, meta_steps, assist) -> Rollouts:
+    """One scene's rollouts of one mode (``task_mask`` and ``orient``, the scene's
+    task mask and (orient_kind, orient_quat, orient_axis); ``drawn``: its users' drawn
+    settings, (N, T, U); the rest :func:`_with_assist`'s, (N, T, ...))."""
+    lanes = out.code.shape
+    dr = vmap_leading(lambda o, r, t: am.delta_r(o, r, orient, t), 2)(
+        out, r, spread(jnp.arange(lanes[1], dtype=jnp.int32), lanes, (1,)))
+    code = jnp.where(task_mask[None, :], out.code, INVALID)
     return Rollouts(code, out.activated, out.step, out.point, out.path_length, meta_steps, dr,
                     r, drawn, assist)
 
@@ -337,12 +336,15 @@ def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tup
     which = (["init"] if "baseline" in modes else []) + (
         ["opt"] if "shrinking" in modes or "shacc" in modes else [])
 
-    def per_scene(g: Geometry, p: Params):
-        # Both kinds of spaces in one vmap: the pass is traced and compiled once.
-        spaces = jax.tree.map(lambda *xs: jnp.stack(xs), *[g.spaces(w) for w in which])
-        return jax.vmap(partial(am.activation_pass_on, g, p))(spaces)
+    def kinds(g: Geometry):
+        return jax.tree.map(lambda *xs: jnp.stack(xs), *[g.spaces(w) for w in which])
 
-    both = jax.vmap(per_scene)(geometry, params)  # (S, len(which), N, T, ...)
+    # Both kinds of spaces in one pass, traced and compiled once, mapped over the
+    # (scene, kind) pairs as one axis.
+    pairs = (geometry.task_mask.shape[0], len(which))
+    per_scene = jax.tree.map(lambda a: spread(a, pairs, (0,)),
+                             (geometry.starts, geometry.task_mask, params))
+    both = vmap_leading(am.activation_pass_on, 2)(*per_scene, jax.vmap(kinds)(geometry))
     passes = {w: jax.tree.map(lambda a, i=i: a[:, i], both) for i, w in enumerate(which)}
     S_all, N = geometry.starts.shape[:2]
     T = geometry.task_mask.shape[1]
@@ -412,11 +414,14 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     S_all, N = geometry.starts.shape[:2]
     drawn = (jax.vmap(populations.drawn_values)(geometry, params) if layout.populations else
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
-    # The modes stacked (S, M, ...) and assembled in one vmap: traced once, not per mode.
+    # The modes stacked (S, M, ...) and assembled in one map: traced once, not per mode.
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1),
                            *[_with_assist(*one) for one in per_mode])
-    rollouts = jax.vmap(jax.vmap(_assemble, (None, None, 0, 0, 0, 0)))(geometry, drawn,
-                                                                      *stacked)
+    pairs = (S_all, len(per_mode))
+    per_scene = jax.tree.map(lambda a: spread(a, pairs, (0,)), (
+        geometry.task_mask, (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis),
+        drawn))
+    rollouts = vmap_leading(_assemble, 2)(*per_scene, *stacked)
     result = Evaluation(rollouts, batch_metrics(rollouts, geometry.task_mask, params.dt))
     if points:
         result = jax.tree.map(lambda a: a.reshape(points, S, *a.shape[1:]), result)

@@ -10,14 +10,12 @@ rollouts were split into pieces, devices or chunks.
 
 from __future__ import annotations
 
-from typing import Any
-
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from geometry_precompute.outcomes import scene_metrics as scene_metrics_np
 
+from .flatmap import spread, vmap_leading
 from .types import OUTCOMES, SUCCESS, Rollouts, SceneMetrics
 
 
@@ -51,10 +49,10 @@ def scene_metrics(outcome: Int[Array, "N T"], delta_r: Float[Array, "N T"],
 def batch_metrics(rollouts: Rollouts, task_mask: Bool[Array, "S T"],
                   dt: Float[Array, " S"]) -> SceneMetrics:
     """:func:`scene_metrics` of every scene and mode of a batch."""
-    per_mode: Any = jax.vmap(scene_metrics, (0, 0, None, 0, 0, 0, None))
-    return SceneMetrics(*jax.vmap(per_mode)(
-        rollouts.outcome, rollouts.delta_R, task_mask, rollouts.step, rollouts.path_length,
-        rollouts.assist, dt))
+    pairs = rollouts.outcome.shape[:2]  # (S, M)
+    return SceneMetrics(*vmap_leading(scene_metrics, 2)(
+        rollouts.outcome, rollouts.delta_R, spread(task_mask, pairs, (0,)), rollouts.step,
+        rollouts.path_length, rollouts.assist, spread(dt, pairs, (0,))))
 
 
 def host_metrics(rollouts: Rollouts, task_mask, dt) -> SceneMetrics:

@@ -14,6 +14,7 @@ from jaxtyping import Array, Float
 
 from geometry_precompute.population import NORMAL, POPULATED, UNIFORM, VALUES
 
+from .flatmap import spread, vmap_leading
 from .streams import rollout_key
 from .types import Geometry, Params
 
@@ -69,5 +70,6 @@ def drawn_values(geometry: Geometry, params: Params) -> Float[Array, "N T 4"]:
         key = rollout_key(params.user_seed, geometry.scene_key, task, index)
         return population_values(key, params, dtype)
 
-    tasks = jnp.arange(T, dtype=jnp.int32)
-    return jax.vmap(lambda i: jax.vmap(lambda t: one(i, t))(tasks))(geometry.start_index)
+    lanes = (geometry.start_index.shape[0], T)
+    return vmap_leading(one, 2)(spread(geometry.start_index, lanes, (0,)),
+                                spread(jnp.arange(T, dtype=jnp.int32), lanes, (1,)))

@@ -1,0 +1,42 @@
+"""vmap over several leading axes as one.
+
+Every level of ``jax.vmap`` batches each primitive of the mapped function once more
+while JAX traces it, and each loop body (``while_loop``, ``scan``) once more as a
+whole. A function mapped over scenes, starts and tasks by three nested vmaps is
+therefore traced about three times over; mapped once over the S x N x T lanes it is
+traced once. The lanes compute the same thing, element by element, either way, so
+the rollouts are the same bits (``tests/test_reference_answers.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+
+def vmap_leading(fn: Callable[..., Any], n: int) -> Callable[..., Any]:
+    """``fn`` mapped over the leading ``n`` axes of every leaf of its arguments, which
+    must all have those ``n`` axes (give shared values by closure, and values that vary
+    along some of the axes only by :func:`spread`). The outputs get the ``n`` axes back."""
+
+    def mapped(*args):
+        lead = jax.tree.leaves(args)[0].shape[:n]
+        size = math.prod(lead)
+        flat = jax.tree.map(lambda a: a.reshape(size, *a.shape[n:]), args)
+        return jax.tree.map(lambda a: a.reshape(*lead, *a.shape[1:]), jax.vmap(fn)(*flat))
+
+    return mapped
+
+
+def spread(a: Array, lead: tuple[int, ...], axes: tuple[int, ...]) -> Array:
+    """``a``, whose leading axes are the ``axes`` of ``lead`` (in order), broadcast to
+    all of ``lead``: e.g. per-start values (N, ...) spread over (N, T) lanes with
+    ``axes=(0,)``."""
+    rest = a.shape[len(axes):]
+    shape = tuple(lead[i] if i in axes else 1 for i in range(len(lead)))
+    return jnp.broadcast_to(a.reshape(*shape, *rest), (*lead, *rest))
