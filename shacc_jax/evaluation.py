@@ -350,17 +350,47 @@ def _closed_form(geometry: Geometry, params: Params, layout: Layout) -> list[tup
     T = geometry.task_mask.shape[1]
     r0 = jnp.broadcast_to(geometry.starts[:, :, None, 3:], (S_all, N, T, 4))
     no_meta = jnp.zeros((S_all, N, T), jnp.int32)
+    of_mode = {m: passes["init" if m == "baseline" else "opt"] for m in modes}
+    lane = _lane_passes(geometry, params, layout, of_mode)
     per_mode = []
     for mode in modes:
-        path, act, out = passes["init" if mode == "baseline" else "opt"]
-        track = mode == "shacc"
-        if track or layout.collision_checks:
-            r, meta_steps, hit = _lane_pass(geometry, params, path, act, layout, track)
+        path, _, out = of_mode[mode]
+        if mode in lane:
+            r, meta_steps, hit = lane[mode]
             out = _collided(out, path, hit)
         else:
             r, meta_steps = r0, no_meta
         per_mode.append((out, r, meta_steps))
     return per_mode
+
+
+def _lane_passes(geometry: Geometry, params: Params, layout: Layout, of_mode: dict) -> dict:
+    """The closed form's lane passes ((R, meta steps, first collision) per mode): the
+    shacc mode's, which tracks, and with collision checks every mode's. Where
+    ``stepping.FOLD`` says so (CPUs), they run as one pass: the other modes' lanes on
+    copies of the scenes without clusters, where the gripper never enters a meta
+    region, so the tracking turns nothing and the collision checks see the start's R,
+    as in a pass of their own (the same bits); one pass fewer to trace and compile
+    per mode. ``of_mode``: each mode's (path, activation, outcome)."""
+    modes = [m for m in of_mode if m == "shacc" or layout.collision_checks]
+    backend = jax.default_backend()
+    if len(modes) < 2 or not stepping.FOLD.get(backend, stepping.FOLD["accelerator"]):
+        return {m: _lane_pass(geometry, params, of_mode[m][0], of_mode[m][1], layout,
+                              m == "shacc") for m in modes}
+    track = "shacc" in modes
+    modes = sorted(modes, key=lambda m: m != "shacc")  # shacc's lanes on the scenes
+    plain = geometry._replace(cluster=jnp.full_like(geometry.cluster, -1))
+    copies = [geometry if m == "shacc" else plain for m in modes]
+    S = geometry.starts.shape[0]
+
+    def joined(*xs):
+        return jnp.concatenate(xs)
+
+    got = _lane_pass(jax.tree.map(joined, *copies),
+                     jax.tree.map(lambda a: joined(*[a] * len(modes)), params),
+                     jax.tree.map(joined, *[of_mode[m][0] for m in modes]),
+                     jax.tree.map(joined, *[of_mode[m][1] for m in modes]), layout, track)
+    return {m: tuple(a[i * S:(i + 1) * S] for a in got) for i, m in enumerate(modes)}
 
 
 def _per_mode(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:
