@@ -22,6 +22,7 @@ from shacc_jax import body_distance as bodies
 from shacc_jax import collision as col
 from shacc_jax import gripper as grip
 from shacc_jax import path_cull as cull
+from shacc_jax import stepping
 from shacc_jax.types import COLLISION, SUCCESS, Geometry, Params
 
 MODES = {m: i for i, m in enumerate(shacc_jax.MODES)}
@@ -172,6 +173,24 @@ def test_collision_rollouts_agree_with_reference(colliding):
     assert len(agree) >= 0.999 * len(table), sorted(set(table) - set(agree))[:5]
     compare(ev, agree, dr_tol=5e-3)
     assert (ro.outcome == COLLISION).sum() > 20
+
+
+def test_lane_passes_joined_on_a_cpu_give_each_modes_own_rollouts(colliding):
+    """On a CPU (stepping.FOLD) the closed form's lane passes run as one: shacc's lanes
+    on the scenes, the other modes' on copies without clusters. Each mode's rollouts
+    equal those of a program that evaluates it alone (its own lane pass), bit for bit,
+    every field: shrinking's (collision checks only, on a copy) and shacc's (tracking
+    too). Shrinking walks shacc's paths, so a copy that kept its clusters would turn
+    its gripper in the meta regions and fail. (Baseline activates where it enters a
+    cluster member's initial space, so it never has a meta window.)"""
+    assert stepping.FOLD["cpu"]
+    b, ev = colliding
+    for mode in ("shrinking", "shacc"):
+        alone = run(b, modes=(mode,))
+        for field in ev.rollouts._fields:
+            a = getattr(ev.rollouts, field)[:, MODES[mode]]
+            assert np.array_equal(a, getattr(alone.rollouts, field)[:, 0], equal_nan=True), (
+                mode, field)
 
 
 def test_mixed_batch_and_no_recompile(count_compiles):
