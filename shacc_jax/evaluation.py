@@ -34,7 +34,7 @@ from . import collision as col
 from . import lanes as lane_scheduler
 from . import path_cull as cull
 from . import populations, stepping, tracking
-from .flatmap import spread, vmap_leading
+from .flatmap import spread, stacked, unstacked, vmap_leading
 from .metrics import batch_metrics
 from .types import (
     COLLISION,
@@ -381,16 +381,10 @@ def _lane_passes(geometry: Geometry, params: Params, layout: Layout, of_mode: di
     modes = sorted(modes, key=lambda m: m != "shacc")  # shacc's lanes on the scenes
     plain = geometry._replace(cluster=jnp.full_like(geometry.cluster, -1))
     copies = [geometry if m == "shacc" else plain for m in modes]
-    S = geometry.starts.shape[0]
-
-    def joined(*xs):
-        return jnp.concatenate(xs)
-
-    got = _lane_pass(jax.tree.map(joined, *copies),
-                     jax.tree.map(lambda a: joined(*[a] * len(modes)), params),
-                     jax.tree.map(joined, *[of_mode[m][0] for m in modes]),
-                     jax.tree.map(joined, *[of_mode[m][1] for m in modes]), layout, track)
-    return {m: tuple(a[i * S:(i + 1) * S] for a in got) for i, m in enumerate(modes)}
+    got = _lane_pass(stacked(*copies), stacked(*[params] * len(modes)),
+                     stacked(*[of_mode[m][0] for m in modes]),
+                     stacked(*[of_mode[m][1] for m in modes]), layout, track)
+    return dict(zip(modes, unstacked(got, len(modes)), strict=True))
 
 
 def _per_mode(geometry: Geometry, params: Params, layout: Layout) -> list[tuple]:

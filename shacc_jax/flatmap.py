@@ -1,4 +1,4 @@
-"""vmap over several leading axes as one.
+"""vmap over several leading axes as one, and several batches stacked as one.
 
 Every level of ``jax.vmap`` batches each primitive of the mapped function once more
 while JAX traces it, and each loop body (``while_loop``, ``scan``) once more as a
@@ -46,3 +46,17 @@ def spread(a: Array, lead: tuple[int, ...], axes: tuple[int, ...]) -> Array:
     rest = a.shape[len(axes):]
     shape = tuple(lead[i] if i in axes else 1 for i in range(len(lead)))
     return jnp.broadcast_to(a.reshape(*shape, *rest), (*lead, *rest))
+
+
+def stacked(*trees: Any) -> Any:
+    """The batches ``trees`` (pytrees of one structure) as one: each leaf concatenated
+    along its leading axis, in order. :func:`unstacked` splits the result of a function
+    mapped over the joined batch back."""
+    return jax.tree.map(lambda *xs: jnp.concatenate(xs), *trees)
+
+
+def unstacked(tree: Any, n: int) -> list[Any]:
+    """``tree`` split into ``n`` equal parts along every leaf's leading axis: the
+    inverse of :func:`stacked` for ``n`` batches of one size."""
+    size = jax.tree.leaves(tree)[0].shape[0] // n
+    return [jax.tree.map(lambda a, i=i: a[i * size:(i + 1) * size], tree) for i in range(n)]

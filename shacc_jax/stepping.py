@@ -29,6 +29,7 @@ from . import quaternion as quat
 from . import shapes
 from .activation import CLEARANCE_MARGIN, SceneView, check, sdfs
 from .assistance import CORRECT, WRONG, assist_position, first_assistance, prepare
+from .flatmap import stacked, unstacked
 from .hulls import Hulls
 from .populations import with_population
 from .rollout_state import Lane, State
@@ -356,11 +357,10 @@ def folded_pass(geometry: Geometry, params: Params, layout: Layout, mode: str, i
     if into not in FOLDS.get(mode, ()):
         raise ValueError(f"mode {mode!r} cannot run in the pass of {into!r} "
                          f"(stepping.FOLDS: {FOLDS})")
-    S = geometry.starts.shape[0]
     plain = geometry._replace(center_opt=geometry.center_init, quat_opt=geometry.quat_init,
                               dims_opt=geometry.dims_init,
                               cluster=jnp.full_like(geometry.cluster, -1))
-    both = stepped_pass(jax.tree.map(lambda a, b: jnp.concatenate([a, b]), plain, geometry),
-                        jax.tree.map(lambda a: jnp.concatenate([a, a]), params), layout, into,
+    both = stepped_pass(stacked(plain, geometry), stacked(params, params), layout, into,
                         backend)
-    return jax.tree.map(lambda a: a[:S], both), jax.tree.map(lambda a: a[S:], both)
+    got, into_got = unstacked(both, 2)
+    return got, into_got
