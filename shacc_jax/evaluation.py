@@ -439,13 +439,13 @@ def evaluate(geometry: Geometry, params: Params, layout: Layout) -> Evaluation:
     drawn = (jax.vmap(populations.drawn_values)(geometry, params) if layout.populations else
              jnp.zeros((S_all, N, geometry.task_mask.shape[1], 0), geometry.starts.dtype))
     # The modes stacked (S, M, ...) and assembled in one map: traced once, not per mode.
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1),
+    by_mode = jax.tree.map(lambda *xs: jnp.stack(xs, axis=1),
                            *[_with_assist(*one) for one in per_mode])
     pairs = (S_all, len(per_mode))
     per_scene = jax.tree.map(lambda a: spread(a, pairs, (0,)), (
         geometry.task_mask, (geometry.orient_kind, geometry.orient_quat, geometry.orient_axis),
         drawn))
-    rollouts = vmap_leading(_assemble, 2)(*per_scene, *stacked)
+    rollouts = vmap_leading(_assemble, 2)(*per_scene, *by_mode)
     result = Evaluation(rollouts, batch_metrics(rollouts, geometry.task_mask, params.dt))
     if points:
         result = jax.tree.map(lambda a: a.reshape(points, S, *a.shape[1:]), result)
