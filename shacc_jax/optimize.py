@@ -41,7 +41,7 @@ from jaxtyping import Array
 
 from geometry_precompute import schema
 
-from . import program_cache, shapes
+from . import flatmap, program_cache, shapes
 from . import quaternion as quat
 from .automaton import activation_pass
 from .types import SUCCESS, AnyArray, Geometry, Params, Search, SearchProblem
@@ -283,8 +283,7 @@ def _search_one(geometry: Geometry, settings: Params, pb: SearchProblem, populat
         # (h, v, c) of the initial and the Shrinking sizes, from the first generation.
         seeds = jax.tree.map(lambda old, new: jnp.where(g == 0, new, old), seeds,
                              (h[:2], v[:2], c[:2]))
-        top = _best_distinct(*(jnp.concatenate([a, b]) for a, b in
-                               zip(top, (pop, f, h, v, c), strict=True)), k=candidates)
+        top = _best_distinct(*flatmap.stacked(top, (pop, f, h, v, c)), k=candidates)
         best_h = jnp.maximum(best_h, jnp.max(h))
         state, _ = es.tell(k_tell, pop, f, state, es_params)
         return (state, key, top, seeds, best_h), best_h
@@ -302,10 +301,10 @@ def _search_one(geometry: Geometry, settings: Params, pb: SearchProblem, populat
     # their search fitness) and the initial sizes, scored on the validation starts;
     # the first of the best wins, so a tie goes to Shrinking. Without validation
     # (``search``) the search's best wins.
-    pool = jnp.concatenate([z_shrunk[None], top_z, z_init[None]])
-    pool_h = jnp.concatenate([h_shrunk[None], top_h, h_init[None]])
-    pool_v = jnp.concatenate([v_shrunk[None], top_v, v_init[None]])
-    pool_c = jnp.concatenate([c_shrunk[None], top_c, c_init[None]])
+    pool, pool_h, pool_v, pool_c = flatmap.stacked(
+        jax.tree.map(lambda a: a[None], (z_shrunk, h_shrunk, v_shrunk, c_shrunk)),
+        (top_z, top_h, top_v, top_c),
+        jax.tree.map(lambda a: a[None], (z_init, h_init, v_init, c_init)))
     real = jnp.concatenate([jnp.array([True]), jnp.isfinite(top_f), jnp.array([True])])
     val_starts, val_mask = validation_starts(pb, n_val)
     val_pb = pb._replace(opt_starts=val_starts, opt_start_mask=val_mask)
