@@ -17,6 +17,7 @@ import programs
 import pytest
 from reference_automaton import OUTCOME_NAMES, User, rollout, turn_across
 from scipy import stats
+from scipy.spatial.transform import Rotation
 
 import shacc_jax
 from geometry_precompute import (
@@ -268,7 +269,8 @@ def test_the_wandering_hand_is_an_ornstein_uhlenbeck_process():
     N(0, 1) per component (Kolmogorov-Smirnov); the process started at N(0, sigma^2 I)
     stays there (stationary variance sigma^2 per component, within its sampling error)
     with lag-one autocorrelation a = exp(-dt / tau) (within four standard errors); a = 0
-    (tau 0) is white noise. The turn is the reference's (scipy's rotation vectors)."""
+    (tau 0) is white noise. The kernel's turn is the reference's, and that is scipy's
+    ``Rotation.from_rotvec(...).apply``."""
     sigma, dt = 0.3, 0.02
     draw = jax.vmap(lambda start: streams.user_draws(3, 99, 0, start, n_steps=400))
     steps, once = draw(np.arange(200, dtype=np.int32))
@@ -293,6 +295,12 @@ def test_the_wandering_hand_is_an_ornstein_uhlenbeck_process():
         jnp.asarray(u, jnp.float32), v.astype(jnp.float32)))(jnp.asarray(ws)))
     ref = np.array([turn_across(u, v) for v in ws])
     np.testing.assert_allclose(turned, ref, atol=2e-6)
+    # The reference's turn (Python floats) is scipy's, from no turn to several turns.
+    scales = np.array([0.0, 1e-12, 1e-6, 1e-3, 0.1, 1.0, 3.0, 10.0])
+    for v in (ws[:, None] / sigma * scales[:, None]).reshape(-1, 3):
+        across = v - (v @ u) * u
+        np.testing.assert_allclose(turn_across(u, v), Rotation.from_rotvec(across).apply(u),
+                                   rtol=0, atol=1e-14)
 
 
 def test_step_draws_are_jax_threefry():
