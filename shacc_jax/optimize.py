@@ -301,10 +301,10 @@ def _search_one(geometry: Geometry, settings: Params, pb: SearchProblem, populat
     # their search fitness) and the initial sizes, scored on the validation starts;
     # the first of the best wins, so a tie goes to Shrinking. Without validation
     # (``search``) the search's best wins.
-    pool, pool_h, pool_v, pool_c = flatmap.stacked(
-        jax.tree.map(lambda a: a[None], (z_shrunk, h_shrunk, v_shrunk, c_shrunk)),
-        (top_z, top_h, top_v, top_c),
-        jax.tree.map(lambda a: a[None], (z_init, h_init, v_init, c_init)))
+    pool = jnp.concatenate([z_shrunk[None], top_z, z_init[None]])
+    pool_h = jnp.concatenate([h_shrunk[None], top_h, h_init[None]])
+    pool_v = jnp.concatenate([v_shrunk[None], top_v, v_init[None]])
+    pool_c = jnp.concatenate([c_shrunk[None], top_c, c_init[None]])
     real = jnp.concatenate([jnp.array([True]), jnp.isfinite(top_f), jnp.array([True])])
     val_starts, val_mask = validation_starts(pb, n_val)
     val_pb = pb._replace(opt_starts=val_starts, opt_start_mask=val_mask)
